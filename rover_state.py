@@ -1,0 +1,59 @@
+"""The one mutable object that carries a rover's state between frames.
+
+Telemetry fills the first block, perception the second, decision the third.
+Modules that need private memory keep it in their own attribute (for example
+``rover.perception_memory`` or ``rover.nav``) so they never fight over names.
+"""
+import numpy as np
+
+WORLD_SIZE = 200  # world and map edge, metres == pixels (1 px = 1 m)
+IMAGE_SHAPE = (160, 320, 3)  # camera frame rows, columns, RGB
+
+
+class RoverState:
+    def __init__(self, ground_truth=None, clock_start=None):
+        # --- telemetry (set by supporting_functions.update_rover) ---------
+        self.start_time = clock_start  # clock value at first telemetry, s
+        self.total_time = 0.0  # seconds since first telemetry
+        self.frame_count = 0  # telemetry frames handled
+        self.img = None  # current camera frame, RGB uint8 160x320x3
+        self.pos = (np.nan, np.nan)  # (x, y) world metres
+        self.yaw = 0.0  # degrees CCW from +x, [0, 360)
+        self.pitch = 0.0  # degrees, signed (-180, 180], positive = nose down
+        self.roll = 0.0  # degrees, signed (-180, 180]
+        self.vel = 0.0  # m/s, negative when reversing
+        self.steer_telemetry = 0.0  # steering echoed by the simulator, degrees
+        self.throttle_telemetry = 0.0  # throttle echoed by the simulator
+        self.brake_telemetry = 0.0  # brake echoed by the simulator
+        self.near_sample = False  # simulator says a sample is in pickup reach
+        self.picking_up = False  # simulator is running the pickup arm
+        self.samples_remaining = None  # simulator's sample_count (remaining)
+        self.samples_initial = None  # sample_count at the first telemetry
+        self.samples_pos = (np.zeros(0), np.zeros(0))  # remaining samples (xs, ys), scoring only
+        self.start_pos = None  # (x, y) of the first valid telemetry: "home"
+        self.telemetry_ok = False  # last frame parsed cleanly
+
+        # --- perception (set by perception.perception_step) ---------------
+        self.nav_angles = np.zeros(0)  # navigable pixels, rover-centric radians (left +)
+        self.nav_dists = np.zeros(0)  # navigable pixels, metres from rover origin
+        self.obs_angles = np.zeros(0)
+        self.obs_dists = np.zeros(0)
+        self.rock_angles = np.zeros(0)
+        self.rock_dists = np.zeros(0)
+        self.vision_image = np.zeros(IMAGE_SHAPE, dtype=np.uint8)  # shown as inset 2
+        self.worldmap = np.zeros((WORLD_SIZE, WORLD_SIZE, 3), dtype=np.uint8)  # [y, x]: R obstacle, G rock, B navigable
+        self.rocks_world = []  # remembered sample-rock world positions [(x, y), ...]
+        self.map_updated = False  # this frame passed the tilt gate and updated the map
+
+        # --- decision (set by decision.decision_step) ---------------------
+        self.mode = "forward"  # current mode name, shown in the vision inset
+        self.target = None  # (x, y) the decision is heading for, or None
+        self.throttle = 0.0  # command, [-1, 1]
+        self.brake = 0.0  # command, >= 0
+        self.steer = 0.0  # command, degrees, clamped to +-15, positive = left
+        self.send_pickup = False  # ask the simulator to pick up this frame
+        self.pickup_sent_at = None  # total_time of the last pickup request
+        self.mission_complete = False  # all collected and home
+
+        # --- scoring / display ---------------------------------------------
+        self.ground_truth = ground_truth  # 200x200 uint8 map_bw (255 navigable) or None
