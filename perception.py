@@ -1,0 +1,517 @@
+"""Vision and mapping: camera frame -> rover-frame terrain -> world confidence map.
+
+Why it is built this way:
+- The perspective transform comes from the simulator's real camera geometry
+  (pinhole f = 114.25 px, cx = 160, cy = 80, 0.2146 m above the floor, 0.4287 m
+  ahead of the rover origin) instead of hand-picked calibration points, and it is
+  recomputed for the body's pitch and roll, so small tilts do not smear the map.
+- The map is a pair of per-cell vote accumulators (navigable, obstacle) fed only by
+  nearby ground (range limit) while the body is level enough (tilt gate); the
+  displayed ``rover.worldmap`` is rebuilt from the votes every frame, so early
+  wrong marks are overturned by later, better views.
+- Speed: everything per frame is a few OpenCV calls on a fixed-size top-down grid
+  plus ``np.bincount`` on precomputed cell indices (well under 1 ms).
+
+Frames (see docs/ARCHITECTURE.md): world x east / y north, 1 map px = 1 m,
+maps indexed ``[y, x]``; rover frame x forward, y left, angles radians, left +.
+Unity axes inside the camera model: x right, y up, z forward; body rotation
+``R = Ry(90 - yaw) . Rx(pitch) . Rz(roll)``, positive pitch = nose down.
+
+Private memory lives in ``rover.perception_memory`` (a :class:`PerceptionMemory`).
+Planning code should read it through :func:`occupancy_grids`.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import List, Optional, Tuple
+
+import cv2
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+# --- camera (simulator geometry; overridden by ../shared/.../camera.json if present) ---
+IMAGE_W = 320  # camera frame width, px
+IMAGE_H = 160  # camera frame height, px
+FOCAL_PX = 114.251841  # pinhole focal length, px (80 / tan 35 deg)
+CX = 160.0  # principal point column, px (pixel u has its centre at u + 0.5)
+CY = 80.0  # principal point row, px (the horizon of a level camera)
+CAMERA_FORWARD_M = 0.4287  # camera ahead of the rover origin, m
+CAMERA_MOUNT_UP_M = 0.2391  # camera above the rover root, m
+ROOT_HEIGHT_M = -0.0245  # rover root relative to the floor (suspension bottomed out), m
+CAMERA_HEIGHT_M = CAMERA_MOUNT_UP_M + ROOT_HEIGHT_M  # camera above a flat floor, m (0.2146)
+
+# --- colour thresholds (RGB, inclusive) ---
+NAV_RGB_MIN = (161, 161, 161)  # light floor sand: every channel above 160
+ROCK_RGB_MIN = (110, 90, 0)  # sample rocks are gold (1, 0.85, 0): bright R and G ...
+ROCK_RGB_MAX = (255, 255, 60)  # ... and little blue
+ROCK_MIN_PIXELS = 4  # smaller gold blobs are ignored as noise, px
+
+# --- top-down grid (rover frame) used for both decision outputs and map votes ---
+GRID_RES_M = 0.1  # top-down cell edge, m (the starter's 10 px per metre)
+GRID_FORWARD_M = 12.0  # grid reaches this far ahead of the rover origin, m
+GRID_HALF_WIDTH_M = 12.0  # grid spans +- this much to each side, m
+GRID_MIN_FORWARD_M = 0.6  # cells nearer than this are hidden under the camera, m
+DECISION_RANGE_M = 12.0  # nav/obstacle pixels handed to decision reach this far, m
+
+# --- mapping ---
+WORLD_SIZE = 200  # world map edge, cells (1 cell = 1 m)
+MAP_RANGE_M = 6.0  # only ground within this distance votes, m
+MAP_RANGE_FALLOFF = 0.5  # vote weight at MAP_RANGE_M relative to 1 at the rover (linear), 0..1
+NAV_VOTE_WEIGHT = 1.0  # weight of one navigable top-down cell vote
+OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
+NAV_MAJORITY = 0.6  # a map cell shows navigable when nav share of votes exceeds this, 0..1
+MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
+TILT_GATE_DEG = 1.5  # skip map votes when |pitch| or |roll| exceeds this, deg
+MIN_SPEED_FOR_GATE = None  # reserved: no speed gating (None = off)
+
+# --- rocks ---
+ROCK_MAX_RANGE_M = 9.0  # rock detections farther than this are not remembered, m
+ROCK_TILT_GATE_DEG = 3.0  # rock positions are not remembered above this tilt, deg
+ROCK_MERGE_RADIUS_M = 2.0  # detections closer than this to a known rock refine it, m
+ROCK_MIN_HITS = 3  # detections needed before a rock is reported in rocks_world
+ROCK_SUPPRESS_RADIUS_M = 5.0  # a weak cluster this close to a much stronger one is an echo of it, m
+ROCK_SUPPRESS_RATIO = 5.0  # "much stronger": this many times the weight
+ROCK_MARK_HALF_PX = 1  # rocks are drawn as (2*half+1)^2 green squares on the worldmap
+
+# --- display ---
+VISION_BLEND = 0.45  # weight of the camera image under the colour-coded masks, 0..1
+
+
+def _load_camera_json():
+    """Use the simulator's camera.json when ../shared is present (never required)."""
+    global FOCAL_PX, CX, CY, CAMERA_FORWARD_M, CAMERA_MOUNT_UP_M, ROOT_HEIGHT_M, CAMERA_HEIGHT_M
+    try:
+        import shared_data
+
+        path = shared_data.world_dir() / "camera.json"
+        if not path.is_file():
+            return
+        cam = json.loads(path.read_text())
+        intr, mount = cam["intrinsics_px"], cam["mount_in_rover_frame_m"]
+        values = (float(intr["fx"]), float(intr["cx"]), float(intr["cy"]), float(mount["z_forward"]),
+                  float(mount["y_up"]), float(cam["rover_root_height_on_flat_floor_m"]))
+        if not all(math.isfinite(v) for v in values) or values[0] <= 0:
+            raise ValueError("non-finite or non-positive camera numbers")
+        FOCAL_PX, CX, CY, CAMERA_FORWARD_M, CAMERA_MOUNT_UP_M, ROOT_HEIGHT_M = values
+        CAMERA_HEIGHT_M = CAMERA_MOUNT_UP_M + ROOT_HEIGHT_M
+    except Exception as exc:  # a broken reference file must not break the client
+        log.warning("ignoring camera.json (%s); using built-in camera constants", exc)
+
+
+_load_camera_json()
+
+
+# =============================================================================== masks
+def navigable_mask(rgb: np.ndarray) -> np.ndarray:
+    """Light floor sand: bool (160, 320), True where every channel > 160."""
+    return cv2.inRange(rgb, NAV_RGB_MIN, (255, 255, 255)).view(bool)
+
+
+def rock_mask(rgb: np.ndarray) -> np.ndarray:
+    """Gold sample-rock pixels: bool (160, 320)."""
+    return cv2.inRange(rgb, ROCK_RGB_MIN, ROCK_RGB_MAX).view(bool)
+
+
+def obstacle_mask(rgb: np.ndarray) -> np.ndarray:
+    """Below-horizon pixels that are neither sand nor sample rock (walls, boulders): bool (160, 320)."""
+    nav = cv2.inRange(rgb, NAV_RGB_MIN, (255, 255, 255))
+    rock = cv2.inRange(rgb, ROCK_RGB_MIN, ROCK_RGB_MAX)
+    obs = cv2.bitwise_not(cv2.bitwise_or(nav, rock))
+    obs[:_HORIZON_ROW] = 0
+    return obs.view(bool)
+
+
+# =============================================================================== camera model
+def _rot_x(deg):
+    a = math.radians(deg)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def _rot_y(deg):
+    a = math.radians(deg)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def _rot_z(deg):
+    a = math.radians(deg)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def body_rotation(yaw_deg=90.0, pitch_deg=0.0, roll_deg=0.0) -> np.ndarray:
+    """Unity-axes body rotation R = Ry(90 - yaw) Rx(pitch) Rz(roll); yaw 90 = level frame."""
+    return _rot_y(90.0 - yaw_deg) @ _rot_x(pitch_deg) @ _rot_z(roll_deg)
+
+
+def camera_position(pitch_deg=0.0, roll_deg=0.0) -> np.ndarray:
+    """Camera centre in the level frame (Unity axes, origin on the floor under the root), m."""
+    tilt = body_rotation(90.0, pitch_deg, roll_deg)
+    return np.array([0.0, ROOT_HEIGHT_M, 0.0]) + tilt @ np.array([0.0, CAMERA_MOUNT_UP_M, CAMERA_FORWARD_M])
+
+
+def pixel_rays(u, v) -> np.ndarray:
+    """Camera-frame ray directions (N, 3) for pixel indices (camera.json convention)."""
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    return np.stack([(u + 0.5 - CX) / FOCAL_PX, (CY - (v + 0.5)) / FOCAL_PX, np.ones_like(u)], axis=-1)
+
+
+def pixel_to_rover(u, v, pitch_deg=0.0, roll_deg=0.0):
+    """Floor point seen at pixel (u, v): rover-frame (x fwd, y left) in m, and a validity mask.
+
+    Rays that do not hit the floor ahead (above the horizon) are invalid (x, y = nan).
+    """
+    tilt = body_rotation(90.0, pitch_deg, roll_deg)
+    d = pixel_rays(u, v) @ tilt.T
+    c = camera_position(pitch_deg, roll_deg)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -c[1] / d[..., 1]
+    valid = (d[..., 1] < -1e-9) & np.isfinite(t)
+    t = np.where(valid, t, np.nan)
+    px = c[0] + t * d[..., 0]
+    pz = c[2] + t * d[..., 2]
+    return pz, -px, valid
+
+
+def rover_to_pixel(x, y, pitch_deg=0.0, roll_deg=0.0):
+    """Pixel coordinates (continuous, pixel u spans [u, u+1)) of floor point(s) in the rover frame."""
+    tilt = body_rotation(90.0, pitch_deg, roll_deg)
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    p = np.stack([-y, np.zeros_like(x), x], axis=-1)  # level frame, Unity axes
+    q = (p - camera_position(pitch_deg, roll_deg)) @ tilt  # = tilt.T @ (p - c)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = CX + FOCAL_PX * q[..., 0] / q[..., 2]
+        v = CY - FOCAL_PX * q[..., 1] / q[..., 2]
+    return u, v, q[..., 2] > 0
+
+
+def ground_homography(pitch_deg=0.0, roll_deg=0.0) -> np.ndarray:
+    """3x3 map from top-down grid (col j, row i, 1) to OpenCV pixel coords (u - 0.5, v - 0.5, 1).
+
+    Grid cell (i, j) centre: x = (i + 0.5) * GRID_RES_M ahead, y = (j + 0.5) * GRID_RES_M - half width.
+    Used with cv2.WARP_INVERSE_MAP, so the floor plane is exact for any pitch/roll.
+    """
+    res, half = GRID_RES_M, GRID_HALF_WIDTH_M
+    c = camera_position(pitch_deg, roll_deg)
+    # level-frame floor point minus camera: Unity x = -y_left, y = 0, z = x_fwd
+    b = np.array([[-res, 0.0, half - 0.5 * res - c[0]],
+                  [0.0, 0.0, -c[1]],
+                  [0.0, res, 0.5 * res - c[2]]])
+    tilt = body_rotation(90.0, pitch_deg, roll_deg)
+    k = np.array([[FOCAL_PX, 0.0, CX - 0.5], [0.0, -FOCAL_PX, CY - 0.5], [0.0, 0.0, 1.0]])
+    return k @ tilt.T @ b
+
+
+# =============================================================================== transforms
+def rover_coords(mask: np.ndarray, pitch_deg=0.0, roll_deg=0.0):
+    """Rover-frame floor coordinates (x fwd, y left; m) of a camera-image mask's True pixels."""
+    v, u = np.nonzero(mask)
+    x, y, valid = pixel_to_rover(u, v, pitch_deg, roll_deg)
+    return x[valid], y[valid]
+
+
+def to_polar_coords(x, y):
+    """Rover-frame (x, y) -> (distance m, angle rad, left +)."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    return np.hypot(x, y), np.arctan2(y, x)
+
+
+def from_polar_coords(dist, angle):
+    """Inverse of to_polar_coords."""
+    return dist * np.cos(angle), dist * np.sin(angle)
+
+
+def rover_to_world(x, y, xpos, ypos, yaw_deg, scale=1.0):
+    """Rover-frame metres -> world metres (float; floor() gives the map cell)."""
+    a = math.radians(yaw_deg)
+    c, s = math.cos(a), math.sin(a)
+    x = np.asarray(x, dtype=np.float64) / scale
+    y = np.asarray(y, dtype=np.float64) / scale
+    return xpos + x * c - y * s, ypos + x * s + y * c
+
+
+def world_to_rover(xw, yw, xpos, ypos, yaw_deg, scale=1.0):
+    """World metres -> rover-frame metres (inverse of rover_to_world)."""
+    a = math.radians(yaw_deg)
+    c, s = math.cos(a), math.sin(a)
+    dx = np.asarray(xw, dtype=np.float64) - xpos
+    dy = np.asarray(yw, dtype=np.float64) - ypos
+    return (dx * c + dy * s) * scale, (-dx * s + dy * c) * scale
+
+
+# =============================================================================== precomputed tables
+def _build_tables():
+    """Precompute the top-down grid geometry (call again after changing grid/map constants)."""
+    global _GRID_ROWS, _GRID_COLS, _GRID_X, _GRID_Y, _GRID_DIST, _GRID_ANGLE, _GRID_USABLE
+    global _GRID_HIDDEN, _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _HORIZON_ROW, _LEVEL_H
+    _GRID_ROWS = int(round(GRID_FORWARD_M / GRID_RES_M))
+    _GRID_COLS = int(round(2 * GRID_HALF_WIDTH_M / GRID_RES_M))
+    _GRID_X = (np.arange(_GRID_ROWS)[:, None] + 0.5) * GRID_RES_M + np.zeros((1, _GRID_COLS))  # fwd, m
+    _GRID_Y = (np.arange(_GRID_COLS)[None, :] + 0.5) * GRID_RES_M - GRID_HALF_WIDTH_M + np.zeros((_GRID_ROWS, 1))
+    dist, angle = to_polar_coords(_GRID_X, _GRID_Y)
+    _GRID_DIST = dist.astype(np.float32)
+    _GRID_ANGLE = angle.astype(np.float32)
+    _GRID_USABLE = (_GRID_X >= GRID_MIN_FORWARD_M) & (dist <= DECISION_RANGE_M)
+    _GRID_HIDDEN = ~_GRID_USABLE
+    _MAP_CELLS = np.flatnonzero(_GRID_USABLE & (dist <= MAP_RANGE_M))  # flat grid indices that vote
+    _MAP_X = _GRID_X.ravel()[_MAP_CELLS]
+    _MAP_Y = _GRID_Y.ravel()[_MAP_CELLS]
+    _MAP_WEIGHT = 1.0 - (1.0 - MAP_RANGE_FALLOFF) * dist.ravel()[_MAP_CELLS] / MAP_RANGE_M
+    _HORIZON_ROW = int(math.floor(CY))  # rows above this never see the floor of a level camera
+    _LEVEL_H = ground_homography(0.0, 0.0)
+
+
+_LABEL_UNKNOWN, _LABEL_OBSTACLE, _LABEL_NAV = 0, 1, 2
+_build_tables()
+
+
+def ground_fov_mask(max_range_m=MAP_RANGE_M) -> np.ndarray:
+    """Camera pixels (bool 160x320) whose ray meets a flat floor within max_range_m of the rover."""
+    v, u = np.mgrid[0:IMAGE_H, 0:IMAGE_W]
+    x, y, valid = pixel_to_rover(u, v)
+    with np.errstate(invalid="ignore"):
+        return valid & (np.hypot(x, y) <= max_range_m)
+
+
+def topdown_fov_mask() -> np.ndarray:
+    """Top-down grid cells (bool) a level camera sees, within DECISION_RANGE_M."""
+    u, v, ahead = rover_to_pixel(_GRID_X, _GRID_Y)
+    inside = ahead & (u >= 0) & (u < IMAGE_W) & (v >= 0) & (v < IMAGE_H)
+    return inside & _GRID_USABLE
+
+
+# =============================================================================== memory
+@dataclass
+class PerceptionMemory:
+    """Perception's private state on ``rover.perception_memory``.
+
+    nav_votes, obs_votes: float32 (200, 200) [y, x]; distance-weighted counts of
+        0.1 m top-down cells that looked navigable / obstacle in a cell. Votes only
+        come from level frames (TILT_GATE_DEG) and ground within MAP_RANGE_M.
+    rock_clusters: list of [sum_w*x, sum_w*y, sum_w, hits] per remembered sample rock.
+    frames_seen, frames_mapped: counters (mapped = passed the tilt gate).
+    last_grid: uint8 top-down label grid of the last frame (0 unknown, 1 obstacle, 2 navigable),
+        rows = forward distance (row i at (i + 0.5) * GRID_RES_M), cols = lateral (left at high j).
+    """
+    nav_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
+    obs_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
+    rock_clusters: List[list] = field(default_factory=list)
+    frames_seen: int = 0
+    frames_mapped: int = 0
+    last_grid: Optional[np.ndarray] = None
+
+
+def get_memory(rover) -> PerceptionMemory:
+    mem = getattr(rover, "perception_memory", None)
+    if mem is None:
+        mem = PerceptionMemory()
+        rover.perception_memory = mem
+    return mem
+
+
+def occupancy_grids(rover) -> Tuple[np.ndarray, np.ndarray]:
+    """(navigable_confidence, obstacle_confidence): float32 (200, 200) [y, x] in 0..1.
+
+    Each is that class's share of the cell's votes times a certainty that grows with
+    the number of votes (0 for never-seen cells), so ``nav > obs`` means "probably
+    free" and both near 0 means "unknown" (a frontier).
+    """
+    mem = get_memory(rover)
+    total = mem.nav_votes + mem.obs_votes
+    certainty = total / (total + MIN_CELL_VOTES)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        nav = np.where(total > 0, mem.nav_votes / total, 0.0) * certainty
+        obs = np.where(total > 0, mem.obs_votes / total, 0.0) * certainty
+    return nav.astype(np.float32), obs.astype(np.float32)
+
+
+def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None) -> np.ndarray:
+    """Rebuild the displayed worldmap from the votes (R obstacle, G rock, B navigable)."""
+    if out is None:
+        out = np.zeros((WORLD_SIZE, WORLD_SIZE, 3), np.uint8)
+    nav, obs = mem.nav_votes, mem.obs_votes
+    total = nav + obs
+    seen = total >= MIN_CELL_VOTES
+    is_nav = seen & (nav > NAV_MAJORITY * total)
+    out[:, :, 2] = np.where(is_nav, 255, 0)
+    out[:, :, 0] = np.where(seen & ~is_nav, 255, 0)
+    out[:, :, 1] = 0
+    for cx, cy in rocks_from_memory(mem):
+        ix, iy = int(cx), int(cy)
+        h = ROCK_MARK_HALF_PX
+        out[max(iy - h, 0):iy + h + 1, max(ix - h, 0):ix + h + 1, 1] = 255
+    return out
+
+
+def rocks_from_memory(mem: PerceptionMemory) -> List[Tuple[float, float]]:
+    """Weighted mean positions of clusters seen often enough and not echoes of a stronger one."""
+    clusters = [(c[0] / c[2], c[1] / c[2], c[2]) for c in mem.rock_clusters if c[3] >= ROCK_MIN_HITS]
+    rocks = []
+    for x, y, w in clusters:
+        echo = any(w2 >= ROCK_SUPPRESS_RATIO * w and math.hypot(x2 - x, y2 - y) < ROCK_SUPPRESS_RADIUS_M
+                   for x2, y2, w2 in clusters)
+        if not echo:
+            rocks.append((x, y))
+    return rocks
+
+
+def _remember_rock(mem: PerceptionMemory, xw: float, yw: float, weight: float):
+    best, best_d = None, ROCK_MERGE_RADIUS_M
+    for c in mem.rock_clusters:
+        d = math.hypot(c[0] / c[2] - xw, c[1] / c[2] - yw)
+        if d < best_d:
+            best, best_d = c, d
+    if best is None:
+        mem.rock_clusters.append([xw * weight, yw * weight, weight, 1])
+    else:
+        best[0] += xw * weight
+        best[1] += yw * weight
+        best[2] += weight
+        best[3] += 1
+
+
+# =============================================================================== per frame
+def label_grid(nav: np.ndarray, pitch_deg=0.0, roll_deg=0.0) -> np.ndarray:
+    """Warp a camera navigable mask (uint8 0/255 or bool) onto the top-down grid.
+
+    Returns uint8 (rows, cols): 0 unknown (outside view / too near), 1 obstacle, 2 navigable.
+    """
+    label = (nav.view(np.uint8) & 1) + 1 if nav.dtype == bool else (nav >> 7) + 1
+    h = _LEVEL_H if (pitch_deg == 0.0 and roll_deg == 0.0) else ground_homography(pitch_deg, roll_deg)
+    grid = cv2.warpPerspective(label, h, (_GRID_COLS, _GRID_ROWS),
+                               flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                               borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    grid[_GRID_HIDDEN] = 0
+    return grid
+
+
+def _rock_detections(rock: np.ndarray, pitch_deg, roll_deg):
+    """Per gold blob: rover-frame floor point under its nearest (bottom) pixel, plus per-pixel polar.
+
+    The blob's bottom row touches the floor, so projecting it is exact; its centroid
+    would project too far because the rock stands above the floor.
+    """
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(rock.view(np.uint8), connectivity=8)
+    points, angles, dists = [], [], []
+    for k in range(1, n):
+        if stats[k, cv2.CC_STAT_AREA] < ROCK_MIN_PIXELS:
+            continue
+        x0, y0 = stats[k, cv2.CC_STAT_LEFT], stats[k, cv2.CC_STAT_TOP]
+        w, h = stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]
+        sub = labels[y0:y0 + h, x0:x0 + w] == k
+        vs, us = np.nonzero(sub)
+        bottom = vs.max()
+        u_bottom = us[vs == bottom].mean() + x0
+        xr, yr, ok = pixel_to_rover(np.array([u_bottom]), np.array([bottom + y0]), pitch_deg, roll_deg)
+        if not ok[0]:
+            continue
+        points.append((float(xr[0]), float(yr[0])))
+        # every pixel column of the blob, placed on the floor at the blob's base row
+        cols = us + x0
+        px, py, pv = pixel_to_rover(cols, np.full(cols.shape, bottom + y0), pitch_deg, roll_deg)
+        d, a = to_polar_coords(px[pv], py[pv])
+        angles.append(a)
+        dists.append(d)
+    if angles:
+        return points, np.concatenate(angles), np.concatenate(dists)
+    return points, np.zeros(0), np.zeros(0)
+
+
+def _finite(v) -> bool:
+    try:
+        return math.isfinite(float(v))
+    except (TypeError, ValueError):
+        return False
+
+
+def _signed(deg) -> float:
+    d = float(deg) % 360.0
+    return d - 360.0 if d > 180.0 else d
+
+
+def vision_overlay(rgb: np.ndarray, nav: np.ndarray, rock: np.ndarray) -> np.ndarray:
+    """Camera view with thresholds colour-coded: blue navigable, red obstacle (below horizon), yellow rock."""
+    nav8 = nav.view(np.uint8) * np.uint8(255) if nav.dtype == bool else nav
+    rock8 = rock.view(np.uint8) * np.uint8(255) if rock.dtype == bool else rock
+    obs8 = cv2.bitwise_not(cv2.bitwise_or(nav8, rock8))
+    obs8[:_HORIZON_ROW] = 0
+    overlay = cv2.merge([cv2.bitwise_or(obs8, rock8), rock8, nav8])
+    return cv2.addWeighted(rgb, VISION_BLEND, overlay, 1.0 - VISION_BLEND, 0.0)
+
+
+def perception_step(rover):
+    """Fill the perception block of RoverState from rover.img and the pose; returns rover."""
+    mem = get_memory(rover)
+    rover.map_updated = False
+    img = getattr(rover, "img", None)
+    if img is None or getattr(img, "shape", None) != (IMAGE_H, IMAGE_W, 3):
+        return rover  # no frame: keep the previous perception
+    if img.dtype != np.uint8 or not img.flags.c_contiguous:
+        img = np.ascontiguousarray(img, dtype=np.uint8)
+    mem.frames_seen += 1
+    pitch = _signed(rover.pitch) if _finite(rover.pitch) else 0.0
+    roll = _signed(rover.roll) if _finite(rover.roll) else 0.0
+
+    nav8 = cv2.inRange(img, NAV_RGB_MIN, (255, 255, 255))
+    rock8 = cv2.inRange(img, ROCK_RGB_MIN, ROCK_RGB_MAX)
+    grid = label_grid(nav8, pitch, roll)
+    mem.last_grid = grid
+
+    # decision outputs (always, even when tilted: the warp already accounts for tilt)
+    nav_cells = grid == _LABEL_NAV
+    obs_cells = grid == _LABEL_OBSTACLE
+    rover.nav_angles = _GRID_ANGLE[nav_cells]
+    rover.nav_dists = _GRID_DIST[nav_cells]
+    rover.obs_angles = _GRID_ANGLE[obs_cells]
+    rover.obs_dists = _GRID_DIST[obs_cells]
+
+    pos = getattr(rover, "pos", (np.nan, np.nan))
+    pose_ok = pos is not None and len(pos) == 2 and _finite(pos[0]) and _finite(pos[1]) and _finite(rover.yaw)
+    level = abs(pitch) <= TILT_GATE_DEG and abs(roll) <= TILT_GATE_DEG
+
+    if pose_ok and level:
+        labels = grid.ravel()[_MAP_CELLS]
+        known = labels != _LABEL_UNKNOWN
+        xw, yw = rover_to_world(_MAP_X[known], _MAP_Y[known], float(pos[0]), float(pos[1]), float(rover.yaw))
+        ix = np.floor(xw).astype(np.int64)
+        iy = np.floor(yw).astype(np.int64)
+        inside = (ix >= 0) & (ix < WORLD_SIZE) & (iy >= 0) & (iy < WORLD_SIZE)
+        flat = (iy * WORLD_SIZE + ix)[inside]
+        w = _MAP_WEIGHT[known][inside]
+        is_nav = labels[known][inside] == _LABEL_NAV
+        n = WORLD_SIZE * WORLD_SIZE
+        mem.nav_votes += np.bincount(flat[is_nav], w[is_nav] * NAV_VOTE_WEIGHT, n).reshape(
+            WORLD_SIZE, WORLD_SIZE).astype(np.float32)
+        mem.obs_votes += np.bincount(flat[~is_nav], w[~is_nav] * OBS_VOTE_WEIGHT, n).reshape(
+            WORLD_SIZE, WORLD_SIZE).astype(np.float32)
+        mem.frames_mapped += 1
+        rover.map_updated = True
+
+    # rocks: cheap presence test first, blob analysis only when gold is in view
+    if cv2.countNonZero(rock8) >= ROCK_MIN_PIXELS:
+        points, rock_angles, rock_dists = _rock_detections(rock8 > 0, pitch, roll)
+        rover.rock_angles, rover.rock_dists = rock_angles, rock_dists
+        if pose_ok and abs(pitch) <= ROCK_TILT_GATE_DEG and abs(roll) <= ROCK_TILT_GATE_DEG:
+            for xr, yr in points:
+                d = math.hypot(xr, yr)
+                if d <= ROCK_MAX_RANGE_M:
+                    xw, yw = rover_to_world(xr, yr, float(pos[0]), float(pos[1]), float(rover.yaw))
+                    _remember_rock(mem, float(xw), float(yw), 1.0 / max(d, 0.5))
+    else:
+        rover.rock_angles, rover.rock_dists = np.zeros(0), np.zeros(0)
+
+    rover.rocks_world = rocks_from_memory(mem)
+    worldmap = getattr(rover, "worldmap", None)
+    if not isinstance(worldmap, np.ndarray) or worldmap.shape != (WORLD_SIZE, WORLD_SIZE, 3):
+        worldmap = None
+    rover.worldmap = render_worldmap(mem, worldmap)
+    rover.vision_image = vision_overlay(img, nav8, rock8)
+    return rover
