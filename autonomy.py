@@ -1,0 +1,209 @@
+"""One telemetry frame end to end: parse -> rover state -> perception ->
+decision -> command (with the pickup safety gate) -> insets.
+
+Why one class: ``drive_rover.py`` (the socket edge) and the twin's mission
+runner drive the same code, so what the twin measures is what the simulator
+gets.  ``handle_telemetry`` never raises: a bad frame or a crash inside
+perception/decision is logged (rate-limited) and answered with a safe stop,
+because the simulator waits for exactly one reply per telemetry and an
+exception would stall it for good.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Callable, Dict, Optional, Tuple
+
+from rover_state import RoverState
+import supporting_functions as sf
+
+log = logging.getLogger(__name__)
+
+PICKUP_MAX_SPEED = 0.05  # |speed| below this counts as stopped for a pickup, m/s (sim reports 0 below 0.01)
+PICKUP_RETRY_S = 1.0  # no second pickup request within this time of the last, s
+MAX_STEER_DEG = 15.0  # simulator steering clamp, degrees
+MAX_THROTTLE = 1.0  # |throttle| clamp (simulator does not clamp; 1 is full torque)
+MAX_BRAKE = 10.0  # brake clamp (simulator does not clamp), brake units
+SAFE_STOP = {"throttle": 0.0, "brake": 1.0, "steer": 0.0}  # command for bad frames
+LOG_EVERY_S = 5.0  # the same warning is logged at most once per this many seconds
+NUMBER_FORMAT = "{:.4f}"  # plain decimal with '.', as the simulator's float.Parse expects
+
+STAGES = ("decode", "perception", "decision", "insets", "total")  # timing hook keys
+
+
+class RateLimitedLog:
+    """Log a message kind at most once per ``every`` seconds, counting the rest."""
+
+    def __init__(self, logger: logging.Logger, every: float = LOG_EVERY_S,
+                 clock: Callable[[], float] = time.monotonic):
+        self.logger, self.every, self.clock = logger, every, clock
+        self._last: Dict[str, float] = {}
+        self._suppressed: Dict[str, int] = {}
+
+    def __call__(self, kind: str, msg: str, *args, level=logging.WARNING, exc_info=False):
+        now = self.clock()
+        last = self._last.get(kind)
+        if last is not None and now - last < self.every:
+            self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
+            return
+        skipped = self._suppressed.pop(kind, 0)
+        if skipped:
+            msg = msg + f" ({skipped} similar suppressed)"
+        self._last[kind] = now
+        self.logger.log(level, msg, *args, exc_info=exc_info)
+
+
+def format_number(value: float) -> str:
+    """A command number for the wire: '.' decimal, 4 places, never '-0.0000'."""
+    return NUMBER_FORMAT.format(float(value) + 0.0).replace("-0.0000", "0.0000")
+
+
+def pickup_allowed(rover) -> bool:
+    """The safety gate: a pickup with no sample near freezes the real simulator,
+    so only ask when near a sample, stopped, not already picking up, and not
+    right after the previous request."""
+    if not rover.near_sample or rover.picking_up:
+        return False
+    if not math.isfinite(rover.vel) or abs(rover.vel) >= PICKUP_MAX_SPEED:
+        return False
+    last = rover.pickup_sent_at
+    return last is None or rover.total_time - last >= PICKUP_RETRY_S or rover.total_time < last
+
+
+def sanitize_command(throttle, brake, steer) -> Optional[Tuple[float, float, float]]:
+    """Clamp a command; None if any part is not a finite number (then stop)."""
+    try:
+        t, b, s = float(throttle), float(brake), float(steer)
+    except (TypeError, ValueError):
+        return None
+    if not (math.isfinite(t) and math.isfinite(b) and math.isfinite(s)):
+        return None
+    t = min(max(t, -MAX_THROTTLE), MAX_THROTTLE)
+    b = min(max(b, 0.0), MAX_BRAKE)
+    s = min(max(s, -MAX_STEER_DEG), MAX_STEER_DEG)
+    return t, b, s
+
+
+def command_payload(throttle: float, brake: float, steer: float) -> Dict[str, str]:
+    return {"throttle": format_number(throttle), "brake": format_number(brake),
+            "steering_angle": format_number(steer)}
+
+
+def _default_steps():
+    """The real perception and decision modules (imported late so that a
+    missing module surfaces as one clear import error at client start)."""
+    import decision
+    import perception
+
+    return perception.perception_step, decision.decision_step
+
+
+class AutonomyClient:
+    """Turns each telemetry dict into exactly one ``(event, payload)`` reply.
+
+    ``perception_step``/``decision_step`` default to the real modules; tests
+    pass doubles.  ``last_timings`` holds the last frame's stage durations in
+    milliseconds (keys in ``STAGES``) for the benchmark; ``last_telemetry`` the
+    last parsed frame (the recorder stores its JPEG bytes).
+    """
+
+    def __init__(self, ground_truth=None, clock: Callable[[], float] = time.monotonic,
+                 insets: bool = True, perception_step=None, decision_step=None):
+        if perception_step is None or decision_step is None:
+            real_perception, real_decision = _default_steps()
+            perception_step = perception_step or real_perception
+            decision_step = decision_step or real_decision
+        self.rover = RoverState(ground_truth=ground_truth)
+        self.clock = clock
+        self.insets = insets
+        self.perception_step = perception_step
+        self.decision_step = decision_step
+        self.warn = RateLimitedLog(log)
+        self.last_timings: Dict[str, float] = {}
+        self.last_telemetry: Optional[sf.Telemetry] = None
+        self.bad_frames = 0  # telemetry frames answered with a safe stop
+        self.step_errors = 0  # exceptions caught from perception/decision/insets
+
+    # -- helpers --------------------------------------------------------------
+    def _safe_stop(self):
+        s = SAFE_STOP
+        return "data", command_payload(s["throttle"], s["brake"], s["steer"])
+
+    def _now(self, tel: sf.Telemetry) -> float:
+        if tel.sim_time is not None:
+            return tel.sim_time
+        return self.clock()
+
+    # -- the frame ------------------------------------------------------------
+    def handle_telemetry(self, data) -> Tuple[str, Dict[str, str]]:
+        """One reply: ("data", command+insets), ("pickup", {}) or ("manual", {})."""
+        t0 = time.perf_counter()
+        timings = {k: 0.0 for k in STAGES}
+        self.last_timings = timings
+        try:
+            reply = self._handle(data, timings)
+        except Exception:  # last line of defence; _handle already guards its steps
+            self.step_errors += 1
+            self.warn("frame", "unexpected error handling telemetry; safe stop", exc_info=True)
+            reply = self._safe_stop()
+        timings["total"] = (time.perf_counter() - t0) * 1e3
+        return reply
+
+    def _handle(self, data, timings):
+        if data is None or (isinstance(data, (dict, str, list)) and len(data) == 0):
+            self.last_telemetry = None
+            return "manual", {}
+        t = time.perf_counter()
+        tel = sf.parse_telemetry(data)
+        timings["decode"] = (time.perf_counter() - t) * 1e3
+        self.last_telemetry = tel
+        if tel.warnings:
+            self.warn("telemetry", "telemetry: %s", "; ".join(tel.warnings))
+        rover = self.rover
+        if not tel.ok:
+            self.bad_frames += 1
+            sf.update_rover(rover, tel, 0.0)
+            self.warn("bad-frame", "bad telemetry frame answered with a safe stop")
+            return self._safe_stop()
+        sf.update_rover(rover, tel, self._now(tel))
+
+        t = time.perf_counter()
+        try:
+            rover.send_pickup = False
+            self.perception_step(rover)
+            timings["perception"] = (time.perf_counter() - t) * 1e3
+            t = time.perf_counter()
+            self.decision_step(rover)
+            timings["decision"] = (time.perf_counter() - t) * 1e3
+        except Exception:
+            self.step_errors += 1
+            self.warn("step", "perception/decision raised; safe stop", exc_info=True)
+            rover.send_pickup = False
+            return self._safe_stop()
+
+        want_pickup = bool(rover.send_pickup)
+        rover.send_pickup = False
+        if want_pickup and pickup_allowed(rover):
+            rover.pickup_sent_at = rover.total_time
+            return "pickup", {}
+        if want_pickup:
+            self.warn("pickup-gate", "pickup vetoed (near=%s, speed=%.3f, picking_up=%s)",
+                      rover.near_sample, rover.vel, rover.picking_up, level=logging.INFO)
+
+        cmd = sanitize_command(rover.throttle, rover.brake, rover.steer)
+        if cmd is None:
+            self.warn("nan", "decision produced a non-finite command (%r, %r, %r); safe stop",
+                      rover.throttle, rover.brake, rover.steer)
+            return self._safe_stop()
+        payload = command_payload(*cmd)
+        if self.insets:
+            t = time.perf_counter()
+            try:
+                payload["inset_image1"], payload["inset_image2"] = sf.create_output_images(rover)
+            except Exception:
+                self.step_errors += 1
+                self.warn("insets", "inset rendering failed; command sent without insets",
+                          exc_info=True)
+            timings["insets"] = (time.perf_counter() - t) * 1e3
+        return "data", payload
