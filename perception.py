@@ -59,14 +59,13 @@ DECISION_RANGE_M = 12.0  # nav/obstacle pixels handed to decision reach this far
 
 # --- mapping ---
 WORLD_SIZE = 200  # world map edge, cells (1 cell = 1 m)
-MAP_RANGE_M = 6.0  # only ground within this distance votes, m
+MAP_RANGE_M = 7.0  # only ground within this distance votes, m
 MAP_RANGE_FALLOFF = 0.5  # vote weight at MAP_RANGE_M relative to 1 at the rover (linear), 0..1
 NAV_VOTE_WEIGHT = 1.0  # weight of one navigable top-down cell vote
 OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
-NAV_MAJORITY = 0.6  # a map cell shows navigable when nav share of votes exceeds this, 0..1
+NAV_MAJORITY = 0.4  # a map cell shows navigable when nav share of votes exceeds this, 0..1
 MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
-TILT_GATE_DEG = 1.5  # skip map votes when |pitch| or |roll| exceeds this, deg
-MIN_SPEED_FOR_GATE = None  # reserved: no speed gating (None = off)
+TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 
 # --- rocks ---
 ROCK_MAX_RANGE_M = 9.0  # rock detections farther than this are not remembered, m
@@ -162,14 +161,14 @@ def pixel_rays(u, v) -> np.ndarray:
     return np.stack([(u + 0.5 - CX) / FOCAL_PX, (CY - (v + 0.5)) / FOCAL_PX, np.ones_like(u)], axis=-1)
 
 
-def pixel_to_rover(u, v, pitch_deg=0.0, roll_deg=0.0):
+def pixel_to_rover(u, v, pitch_deg=0.0, roll_deg=0.0, _tilt=None, _cam=None):
     """Floor point seen at pixel (u, v): rover-frame (x fwd, y left) in m, and a validity mask.
 
     Rays that do not hit the floor ahead (above the horizon) are invalid (x, y = nan).
     """
-    tilt = body_rotation(90.0, pitch_deg, roll_deg)
+    tilt = body_rotation(90.0, pitch_deg, roll_deg) if _tilt is None else _tilt
+    c = camera_position(pitch_deg, roll_deg) if _cam is None else _cam
     d = pixel_rays(u, v) @ tilt.T
-    c = camera_position(pitch_deg, roll_deg)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = -c[1] / d[..., 1]
     valid = (d[..., 1] < -1e-9) & np.isfinite(t)
@@ -251,7 +250,7 @@ def world_to_rover(xw, yw, xpos, ypos, yaw_deg, scale=1.0):
 def _build_tables():
     """Precompute the top-down grid geometry (call again after changing grid/map constants)."""
     global _GRID_ROWS, _GRID_COLS, _GRID_X, _GRID_Y, _GRID_DIST, _GRID_ANGLE, _GRID_USABLE
-    global _GRID_HIDDEN, _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _HORIZON_ROW, _LEVEL_H
+    global _GRID_USABLE_U8, _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _HORIZON_ROW, _LEVEL_H
     _GRID_ROWS = int(round(GRID_FORWARD_M / GRID_RES_M))
     _GRID_COLS = int(round(2 * GRID_HALF_WIDTH_M / GRID_RES_M))
     _GRID_X = (np.arange(_GRID_ROWS)[:, None] + 0.5) * GRID_RES_M + np.zeros((1, _GRID_COLS))  # fwd, m
@@ -260,7 +259,7 @@ def _build_tables():
     _GRID_DIST = dist.astype(np.float32)
     _GRID_ANGLE = angle.astype(np.float32)
     _GRID_USABLE = (_GRID_X >= GRID_MIN_FORWARD_M) & (dist <= DECISION_RANGE_M)
-    _GRID_HIDDEN = ~_GRID_USABLE
+    _GRID_USABLE_U8 = _GRID_USABLE.astype(np.uint8) * np.uint8(255)
     _MAP_CELLS = np.flatnonzero(_GRID_USABLE & (dist <= MAP_RANGE_M))  # flat grid indices that vote
     _MAP_X = _GRID_X.ravel()[_MAP_CELLS]
     _MAP_Y = _GRID_Y.ravel()[_MAP_CELLS]
@@ -307,6 +306,8 @@ class PerceptionMemory:
     frames_seen: int = 0
     frames_mapped: int = 0
     last_grid: Optional[np.ndarray] = None
+    worldmap: Optional[np.ndarray] = None  # the array last handed out as rover.worldmap
+    drawn_rocks: List[Tuple[float, float]] = field(default_factory=list)
 
 
 def get_memory(rover) -> PerceptionMemory:
@@ -333,21 +334,28 @@ def occupancy_grids(rover) -> Tuple[np.ndarray, np.ndarray]:
     return nav.astype(np.float32), obs.astype(np.float32)
 
 
-def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None) -> np.ndarray:
-    """Rebuild the displayed worldmap from the votes (R obstacle, G rock, B navigable)."""
+def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, window=None) -> np.ndarray:
+    """Rebuild the displayed worldmap from the votes (R obstacle, G rock, B navigable).
+
+    ``window`` = (y0, y1, x0, x1) limits the R/B rebuild to the cells whose votes changed.
+    """
     if out is None:
         out = np.zeros((WORLD_SIZE, WORLD_SIZE, 3), np.uint8)
-    nav, obs = mem.nav_votes, mem.obs_votes
-    total = nav + obs
+    y0, y1, x0, x1 = (0, WORLD_SIZE, 0, WORLD_SIZE) if window is None else window
+    nav = mem.nav_votes[y0:y1, x0:x1]
+    total = nav + mem.obs_votes[y0:y1, x0:x1]
     seen = total >= MIN_CELL_VOTES
     is_nav = seen & (nav > NAV_MAJORITY * total)
-    out[:, :, 2] = np.where(is_nav, 255, 0)
-    out[:, :, 0] = np.where(seen & ~is_nav, 255, 0)
-    out[:, :, 1] = 0
-    for cx, cy in rocks_from_memory(mem):
-        ix, iy = int(cx), int(cy)
-        h = ROCK_MARK_HALF_PX
-        out[max(iy - h, 0):iy + h + 1, max(ix - h, 0):ix + h + 1, 1] = 255
+    out[y0:y1, x0:x1, 2] = is_nav.view(np.uint8) * np.uint8(255)
+    out[y0:y1, x0:x1, 0] = (seen & ~is_nav).view(np.uint8) * np.uint8(255)
+    rocks = rocks_from_memory(mem)
+    if window is None or rocks != mem.drawn_rocks:
+        out[:, :, 1] = 0
+        for cx, cy in rocks:
+            ix, iy = int(cx), int(cy)
+            h = ROCK_MARK_HALF_PX
+            out[max(iy - h, 0):iy + h + 1, max(ix - h, 0):ix + h + 1, 1] = 255
+        mem.drawn_rocks = rocks
     return out
 
 
@@ -379,50 +387,58 @@ def _remember_rock(mem: PerceptionMemory, xw: float, yw: float, weight: float):
 
 
 # =============================================================================== per frame
+_GRID_LUT = np.zeros(256, np.uint8)  # warped nav8 value -> label
+_GRID_LUT[0], _GRID_LUT[255], _GRID_LUT[128] = 1, 2, 0  # obstacle, navigable, outside the image
+_WARP_BORDER = 128  # value the warp gives grid cells outside the camera image
+
+
 def label_grid(nav: np.ndarray, pitch_deg=0.0, roll_deg=0.0) -> np.ndarray:
     """Warp a camera navigable mask (uint8 0/255 or bool) onto the top-down grid.
 
     Returns uint8 (rows, cols): 0 unknown (outside view / too near), 1 obstacle, 2 navigable.
     """
-    label = (nav.view(np.uint8) & 1) + 1 if nav.dtype == bool else (nav >> 7) + 1
+    nav8 = nav.view(np.uint8) * np.uint8(255) if nav.dtype == bool else nav
     h = _LEVEL_H if (pitch_deg == 0.0 and roll_deg == 0.0) else ground_homography(pitch_deg, roll_deg)
-    grid = cv2.warpPerspective(label, h, (_GRID_COLS, _GRID_ROWS),
-                               flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
-                               borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    grid[_GRID_HIDDEN] = 0
-    return grid
+    warped = cv2.warpPerspective(nav8, h, (_GRID_COLS, _GRID_ROWS),
+                                 flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=_WARP_BORDER)
+    return cv2.bitwise_and(cv2.LUT(warped, _GRID_LUT), _GRID_USABLE_U8)
 
 
-def _rock_detections(rock: np.ndarray, pitch_deg, roll_deg):
+def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
     """Per gold blob: rover-frame floor point under its nearest (bottom) pixel, plus per-pixel polar.
 
     The blob's bottom row touches the floor, so projecting it is exact; its centroid
-    would project too far because the rock stands above the floor.
+    would project too far because the rock stands above the floor.  Returns
+    (points [(x, y)], angles, dists) where every blob pixel column is placed on the
+    floor at the blob's base row.
     """
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(rock.view(np.uint8), connectivity=8)
-    points, angles, dists = [], [], []
+    if rock8.dtype == bool:
+        rock8 = rock8.view(np.uint8)
+    bx, by, bw, bh = cv2.boundingRect(rock8)
+    crop = rock8[by:by + bh, bx:bx + bw]
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
+    us_all, vs_all, blob_u, blob_v = [], [], [], []
     for k in range(1, n):
         if stats[k, cv2.CC_STAT_AREA] < ROCK_MIN_PIXELS:
             continue
         x0, y0 = stats[k, cv2.CC_STAT_LEFT], stats[k, cv2.CC_STAT_TOP]
         w, h = stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]
-        sub = labels[y0:y0 + h, x0:x0 + w] == k
-        vs, us = np.nonzero(sub)
+        vs, us = np.nonzero(labels[y0:y0 + h, x0:x0 + w] == k)
         bottom = vs.max()
-        u_bottom = us[vs == bottom].mean() + x0
-        xr, yr, ok = pixel_to_rover(np.array([u_bottom]), np.array([bottom + y0]), pitch_deg, roll_deg)
-        if not ok[0]:
-            continue
-        points.append((float(xr[0]), float(yr[0])))
-        # every pixel column of the blob, placed on the floor at the blob's base row
-        cols = us + x0
-        px, py, pv = pixel_to_rover(cols, np.full(cols.shape, bottom + y0), pitch_deg, roll_deg)
-        d, a = to_polar_coords(px[pv], py[pv])
-        angles.append(a)
-        dists.append(d)
-    if angles:
-        return points, np.concatenate(angles), np.concatenate(dists)
-    return points, np.zeros(0), np.zeros(0)
+        blob_u.append(us[vs == bottom].mean() + x0 + bx)
+        blob_v.append(bottom + y0 + by)
+        us_all.append(us + x0 + bx)
+        vs_all.append(np.full(us.shape, bottom + y0 + by))
+    if not blob_u:
+        return [], np.zeros(0), np.zeros(0)
+    tilt = body_rotation(90.0, pitch_deg, roll_deg)
+    cam = camera_position(pitch_deg, roll_deg)
+    xr, yr, ok = pixel_to_rover(np.array(blob_u), np.array(blob_v), _tilt=tilt, _cam=cam)
+    points = [(float(a), float(b)) for a, b, good in zip(xr, yr, ok) if good]
+    px, py, pv = pixel_to_rover(np.concatenate(us_all), np.concatenate(vs_all), _tilt=tilt, _cam=cam)
+    dists, angles = to_polar_coords(px[pv], py[pv])
+    return points, angles, dists
 
 
 def _finite(v) -> bool:
@@ -445,6 +461,34 @@ def vision_overlay(rgb: np.ndarray, nav: np.ndarray, rock: np.ndarray) -> np.nda
     obs8[:_HORIZON_ROW] = 0
     overlay = cv2.merge([cv2.bitwise_or(obs8, rock8), rock8, nav8])
     return cv2.addWeighted(rgb, VISION_BLEND, overlay, 1.0 - VISION_BLEND, 0.0)
+
+
+def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: float):
+    """Add this frame's distance-weighted votes; returns the changed map window (y0, y1, x0, x1)."""
+    labels = grid.ravel()[_MAP_CELLS]
+    known = labels != _LABEL_UNKNOWN
+    xw, yw = rover_to_world(_MAP_X[known], _MAP_Y[known], x, y, yaw)
+    ix = np.floor(xw).astype(np.int64)
+    iy = np.floor(yw).astype(np.int64)
+    inside = (ix >= 0) & (ix < WORLD_SIZE) & (iy >= 0) & (iy < WORLD_SIZE)
+    if not inside.all():
+        ix, iy = ix[inside], iy[inside]
+        known_idx = np.flatnonzero(known)[inside]
+    else:
+        known_idx = np.flatnonzero(known)
+    if ix.size == 0:
+        return None
+    x0, x1, y0, y1 = int(ix.min()), int(ix.max()) + 1, int(iy.min()), int(iy.max()) + 1
+    w_cols = x1 - x0
+    local = (iy - y0) * w_cols + (ix - x0)
+    w = _MAP_WEIGHT[known_idx]
+    is_nav = labels[known_idx] == _LABEL_NAV
+    size = (y1 - y0) * w_cols
+    mem.nav_votes[y0:y1, x0:x1] += np.bincount(local[is_nav], w[is_nav] * NAV_VOTE_WEIGHT, size).reshape(
+        y1 - y0, w_cols)
+    mem.obs_votes[y0:y1, x0:x1] += np.bincount(local[~is_nav], w[~is_nav] * OBS_VOTE_WEIGHT, size).reshape(
+        y1 - y0, w_cols)
+    return y0, y1, x0, x1
 
 
 def perception_step(rover):
@@ -477,27 +521,15 @@ def perception_step(rover):
     pose_ok = pos is not None and len(pos) == 2 and _finite(pos[0]) and _finite(pos[1]) and _finite(rover.yaw)
     level = abs(pitch) <= TILT_GATE_DEG and abs(roll) <= TILT_GATE_DEG
 
+    window = None
     if pose_ok and level:
-        labels = grid.ravel()[_MAP_CELLS]
-        known = labels != _LABEL_UNKNOWN
-        xw, yw = rover_to_world(_MAP_X[known], _MAP_Y[known], float(pos[0]), float(pos[1]), float(rover.yaw))
-        ix = np.floor(xw).astype(np.int64)
-        iy = np.floor(yw).astype(np.int64)
-        inside = (ix >= 0) & (ix < WORLD_SIZE) & (iy >= 0) & (iy < WORLD_SIZE)
-        flat = (iy * WORLD_SIZE + ix)[inside]
-        w = _MAP_WEIGHT[known][inside]
-        is_nav = labels[known][inside] == _LABEL_NAV
-        n = WORLD_SIZE * WORLD_SIZE
-        mem.nav_votes += np.bincount(flat[is_nav], w[is_nav] * NAV_VOTE_WEIGHT, n).reshape(
-            WORLD_SIZE, WORLD_SIZE).astype(np.float32)
-        mem.obs_votes += np.bincount(flat[~is_nav], w[~is_nav] * OBS_VOTE_WEIGHT, n).reshape(
-            WORLD_SIZE, WORLD_SIZE).astype(np.float32)
+        window = _vote(mem, grid, float(pos[0]), float(pos[1]), float(rover.yaw))
         mem.frames_mapped += 1
         rover.map_updated = True
 
     # rocks: cheap presence test first, blob analysis only when gold is in view
     if cv2.countNonZero(rock8) >= ROCK_MIN_PIXELS:
-        points, rock_angles, rock_dists = _rock_detections(rock8 > 0, pitch, roll)
+        points, rock_angles, rock_dists = _rock_detections(rock8, pitch, roll)
         rover.rock_angles, rover.rock_dists = rock_angles, rock_dists
         if pose_ok and abs(pitch) <= ROCK_TILT_GATE_DEG and abs(roll) <= ROCK_TILT_GATE_DEG:
             for xr, yr in points:
@@ -509,9 +541,10 @@ def perception_step(rover):
         rover.rock_angles, rover.rock_dists = np.zeros(0), np.zeros(0)
 
     rover.rocks_world = rocks_from_memory(mem)
-    worldmap = getattr(rover, "worldmap", None)
-    if not isinstance(worldmap, np.ndarray) or worldmap.shape != (WORLD_SIZE, WORLD_SIZE, 3):
-        worldmap = None
-    rover.worldmap = render_worldmap(mem, worldmap)
+    if getattr(rover, "worldmap", None) is not mem.worldmap or mem.worldmap is None:
+        mem.worldmap = render_worldmap(mem)  # first frame, or someone replaced the array: full rebuild
+    elif window is not None or rover.rocks_world != mem.drawn_rocks:
+        render_worldmap(mem, mem.worldmap, window if window is not None else (0, 0, 0, 0))
+    rover.worldmap = mem.worldmap
     rover.vision_image = vision_overlay(img, nav8, rock8)
     return rover
