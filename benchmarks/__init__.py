@@ -1,0 +1,1 @@
+"""Speed benchmarks: print measured figures, never assert (timings are noisy)."""
