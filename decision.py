@@ -1,0 +1,714 @@
+"""Behaviour: one mode state machine that explores, collects samples and returns home.
+
+`decision_step(rover)` is called once per telemetry frame. It reads the
+telemetry and perception fields of `RoverState`, keeps its own memory in
+`rover.nav` (a `NavMemory`, created lazily) and writes the commands
+(`throttle`, `brake`, `steer`, `send_pickup`) plus `mode` and `target` for the
+vision inset.
+
+Modes (one handler function each):
+- forward: explore - follow a planned path to the best frontier (unmapped
+  ground) with pure pursuit, corrected by the current frame's free space;
+- stop:    brake and turn in place toward a heading the rover cannot steer to
+  while moving (the path doubles back, or the way ahead is blocked);
+- stuck:   scripted back-off and turn after no progress while driving; the
+  cells ahead are remembered as blocked so the planner avoids them;
+- sample:  approach a seen (camera) or remembered (map) sample rock slowly;
+- pickup:  stop, request the pickup once when near_sample and stopped, wait;
+- home:    plan back to the start and stop there;
+- done:    parked at home with everything collected (or time is up).
+
+Exploration resumes by itself after a sample because the frontier target is
+re-derived from the map, not from a script.
+"""
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from navigation import astar, explore, grid, pursuit, reactive, stuck
+
+log = logging.getLogger(__name__)
+
+# --- speeds and the longitudinal controller ---------------------------------------
+CRUISE_SPEED_MPS = 3.0  # target speed on a clear, straight path, m/s
+MIN_DRIVE_SPEED_MPS = 0.6  # target speed floor while driving somewhere, m/s
+THROTTLE_GAIN = 1.2  # throttle per m/s of speed deficit
+MAX_THROTTLE = 1.0  # forward throttle cap
+BRAKE_GAIN = 1.5  # brake per m/s of speed excess beyond the deadband
+BRAKE_DEADBAND_MPS = 0.3  # coast (no throttle, no brake) within this excess, m/s
+BRAKE_STOP = 5.0  # brake used to stop / hold still
+MAX_BRAKE = 10.0  # brake command clamp
+STEER_LIMIT_DEG = 15.0  # steering command clamp, degrees
+STOPPED_SPEED_MPS = 0.2  # below this the rover counts as stopped, m/s
+TURN_IN_PLACE_SPEED_MPS = 0.3  # the simulator turns in place only below 0.316 m/s
+
+# --- heading / turning ----------------------------------------------------------------
+ROTATE_ENTER_DEG = 55.0  # a wanted heading further off than this is reached by turning in place, degrees
+ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
+ROTATE_TIMEOUT_S = 6.0  # give up a turn in place after this long, s
+SLOW_TURN_DEG = 35.0  # speed falls linearly to MIN_DRIVE_SPEED at this heading error, degrees
+REACH_SPEED_GAIN = 1.0  # allowed speed per metre of clear corridor beyond REACH_STOP_M, 1/s
+REACH_STOP_M = 1.0  # clear corridor below which the rover will not drive forward, m
+BLOCKED_TURN_DEG = 60.0  # turn this far when the way ahead is blocked, degrees
+WALL_BIAS_STD = 0.6  # fallback wall hugging: steer to mean + this x std of nav angles (left wall)
+FALLBACK_MIN_NAV_PIXELS = 50  # fallback needs this many nav pixels to drive, pixels
+
+# --- planning ----------------------------------------------------------------------------
+REPLAN_S = 1.5  # replan the path at least this often, s
+OFF_PATH_M = 2.5  # replan when the rover is further than this from its path, m
+GOAL_PROGRESS_S = 12.0  # a goal whose path length did not shrink for this long is given up, s
+GOAL_PROGRESS_M = 1.0  # ...by at least this much, m
+FRONTIER_REACHED_M = 1.5  # a frontier target this close is reached (and ignored if still frontier), m
+PATH_END_SLOW_M = 3.0  # slow down over the last metres of a path to a sample or home, m
+
+# --- samples -----------------------------------------------------------------------------
+ROCK_MIN_PIXELS = 3  # rock pixels needed to trust a rock in the current frame
+ROCK_CHASE_M = 10.0  # chase a rock seen in the camera closer than this, m
+ROCK_DETOUR_M = 25.0  # go for a remembered rock closer than this (straight line) while exploring, m
+ROCK_SAME_M = 2.0  # rock positions closer than this are the same rock, m
+SAMPLE_STOP_M = 0.9  # rock distance (rover origin) where approach speed reaches its floor, m
+SAMPLE_SPEED_GAIN = 0.5  # approach speed per metre of rock distance, 1/s
+SAMPLE_MIN_SPEED_MPS = 0.35  # creeping speed near a rock, m/s
+SAMPLE_MAX_SPEED_MPS = 1.5  # fastest approach speed, m/s
+SAMPLE_ROTATE_DEG = 35.0  # turn in place toward a rock further off than this (when slow), degrees
+SAMPLE_STEER_GAIN = 1.0  # steering command per degree of rock bearing
+SAMPLE_TIMEOUT_S = 30.0  # give up a rock after this long in sample mode, s
+ROCK_SKIP_S = 60.0  # a given-up rock is ignored for this long, s
+SAMPLE_VISION_MEMORY_S = 1.0  # keep steering by vision this long after the rock left the frame, s
+PICKUP_STOP_SPEED_MPS = 0.04  # request pickup only below this speed (autonomy's gate is 0.05), m/s
+PICKUP_RETRY_S = 2.0  # re-request a pickup if picking_up did not start within this, s
+PICKUP_REACH_M = 0.84  # pickup point ahead of the rover origin, m
+
+# --- mission -----------------------------------------------------------------------------
+HOME_STOP_M = 1.5  # parked when this close to the start, m
+HOME_BY_S = 570.0  # head home when the estimated arrival would be later than this, s
+HOME_SPEED_ESTIMATE_MPS = 2.0  # speed used to estimate the time to get home, m/s
+SECOND_SWEEP = True  # with samples missing and no frontier left, clear ignored frontiers once
+
+
+@dataclass
+class Inputs:
+    """Sanitised per-frame view of the rover state (never NaN where it matters)."""
+
+    t: float
+    pos: tuple  # (x, y) or None when unknown
+    yaw: float
+    vel: float
+    nav_angles: np.ndarray
+    nav_dists: np.ndarray
+    obs_angles: np.ndarray
+    obs_dists: np.ndarray
+    rock_angles: np.ndarray
+    rock_dists: np.ndarray
+    near_sample: bool
+    picking_up: bool
+    samples_remaining: object  # int or None
+
+
+@dataclass
+class Command:
+    throttle: float = 0.0
+    brake: float = 0.0
+    steer: float = 0.0
+    pickup: bool = False
+
+
+class NavMemory:
+    """Everything the decision layer remembers between frames (lives in rover.nav)."""
+
+    def __init__(self):
+        self.mode = "forward"
+        self.mode_since = 0.0
+        self.home = None  # (x, y) start position
+        self.last_cmd = Command()
+        # stuck
+        self.progress = stuck.ProgressMonitor()
+        self.recovery = None
+        self.stuck_events = []  # (t, x, y)
+        self.stuck_since = None  # start of the current unbroken stuck spell
+        self.blocked = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
+        # turning in place
+        self.rotate_heading = None  # world yaw to turn to, degrees
+        self.rotate_since = 0.0
+        # planning
+        self.path_xy = np.zeros((0, 2))
+        self.path_idx = 0
+        self.path_goal = None  # ("frontier" | "rock" | "home", (row, col))
+        self.plan_time = -math.inf
+        self.frontier_ignored = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
+        self.frontier_count = None  # reachable frontier clusters at the last explore plan
+        self.explored = False
+        self.second_sweep_done = False
+        self.goal_best = math.inf
+        self.goal_best_time = 0.0
+        self.loops = explore.LoopDetector()
+        self.visits = explore.VisitMap((grid.GRID_SIZE, grid.GRID_SIZE))
+        # samples
+        self.rock_target = None  # world (x, y) of the rock being approached
+        self.rock_since = 0.0  # when the current rock target was chosen, s
+        self.rock_seen_time = -math.inf  # last time the target was seen in the camera
+        self.rock_bearing = 0.0  # last camera bearing of the target, rad
+        self.rock_dist = math.inf  # last camera distance of the target, m
+        self.collected = []  # world (x, y) of collected samples
+        self.rock_skip = []  # (x, y, until_t)
+        self.pickup_sent_at = -math.inf
+        self.was_picking = False
+        self.last_remaining = None
+        self.done = False
+
+
+# ============================== entry point ===========================================
+
+def decision_step(rover):
+    """Choose this frame's commands; never raises, never writes NaN."""
+    nav = getattr(rover, "nav", None)
+    if not isinstance(nav, NavMemory):
+        nav = NavMemory()
+        rover.nav = nav
+    rover.send_pickup = False
+    try:
+        s = _read_inputs(rover)
+        _update_memory(rover, nav, s)
+        mode, cmd = _select_and_run(rover, nav, s)
+    except Exception:  # a server must keep running: stop safely and log
+        log.exception("decision_step failed; holding still")
+        mode, cmd = "stop", Command(0.0, BRAKE_STOP, 0.0)
+    _apply(rover, nav, mode, cmd, getattr(rover, "total_time", 0.0))
+    return rover
+
+
+def _finite(x, default=0.0):
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return default
+    return x if math.isfinite(x) else default
+
+
+def _array(x):
+    try:
+        a = np.asarray(x, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        return np.zeros(0)
+    return a
+
+
+def _pair(a_name, d_name, rover):
+    a, d = _array(getattr(rover, a_name, ())), _array(getattr(rover, d_name, ()))
+    n = min(a.size, d.size)
+    a, d = a[:n], d[:n]
+    ok = np.isfinite(a) & np.isfinite(d)
+    return a[ok], d[ok]
+
+
+def _read_inputs(rover):
+    t = _finite(getattr(rover, "total_time", 0.0))
+    pos = getattr(rover, "pos", None)
+    try:
+        px, py = float(pos[0]), float(pos[1])
+        pos = (px, py) if math.isfinite(px) and math.isfinite(py) else None
+    except (TypeError, ValueError, IndexError):
+        pos = None
+    nav_a, nav_d = _pair("nav_angles", "nav_dists", rover)
+    obs_a, obs_d = _pair("obs_angles", "obs_dists", rover)
+    rock_a, rock_d = _pair("rock_angles", "rock_dists", rover)
+    remaining = getattr(rover, "samples_remaining", None)
+    try:
+        remaining = None if remaining is None else int(remaining)
+    except (TypeError, ValueError):
+        remaining = None
+    return Inputs(
+        t=t, pos=pos, yaw=_finite(getattr(rover, "yaw", 0.0)) % 360.0, vel=_finite(getattr(rover, "vel", 0.0)),
+        nav_angles=nav_a, nav_dists=nav_d, obs_angles=obs_a, obs_dists=obs_d,
+        rock_angles=rock_a, rock_dists=rock_d,
+        near_sample=bool(getattr(rover, "near_sample", False)), picking_up=bool(getattr(rover, "picking_up", False)),
+        samples_remaining=remaining,
+    )
+
+
+def _update_memory(rover, nav, s):
+    """Bookkeeping that does not depend on the mode: home, visits, loops, collections."""
+    if nav.home is None:
+        start = getattr(rover, "start_pos", None)
+        try:
+            if start is not None and all(math.isfinite(float(v)) for v in start[:2]):
+                nav.home = (float(start[0]), float(start[1]))
+        except (TypeError, ValueError, IndexError):
+            pass
+        if nav.home is None and s.pos is not None:
+            nav.home = s.pos
+    if s.pos is not None:
+        nav.visits.update(s.t, grid.world_to_cell(s.pos))
+        nav.loops.update(s.t, s.pos, s.yaw)
+    # a pickup that just finished, or a sample count that dropped, means a collection
+    finished = nav.was_picking and not s.picking_up
+    dropped = (nav.last_remaining is not None and s.samples_remaining is not None
+               and s.samples_remaining < nav.last_remaining)
+    if finished or dropped:
+        _register_collection(nav, s)
+    nav.was_picking = s.picking_up
+    if s.samples_remaining is not None:
+        nav.last_remaining = s.samples_remaining
+
+
+def _register_collection(nav, s):
+    if nav.rock_target is not None:
+        where = nav.rock_target
+    elif s.pos is not None:
+        yaw = math.radians(s.yaw)
+        where = (s.pos[0] + PICKUP_REACH_M * math.cos(yaw), s.pos[1] + PICKUP_REACH_M * math.sin(yaw))
+    else:
+        return
+    if not any(math.hypot(where[0] - c[0], where[1] - c[1]) < 0.5 for c in nav.collected):
+        nav.collected.append(where)
+        log.info("sample collected at (%.1f, %.1f), %d so far", where[0], where[1], len(nav.collected))
+    nav.rock_target = None
+    nav.rock_seen_time = -math.inf
+    nav.path_goal = None
+
+
+def _apply(rover, nav, mode, cmd, t):
+    """Clamp, de-NaN and write the commands; remember them for the stuck monitor."""
+    throttle = float(np.clip(_finite(cmd.throttle), -1.0, 1.0))
+    brake = float(np.clip(_finite(cmd.brake, BRAKE_STOP), 0.0, MAX_BRAKE))
+    steer = float(np.clip(_finite(cmd.steer), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
+    rover.throttle, rover.brake, rover.steer = throttle, brake, steer
+    rover.send_pickup = bool(cmd.pickup)
+    if mode != nav.mode:
+        log.debug("mode %s -> %s at t=%.1f", nav.mode, mode, _finite(t))
+        nav.mode = mode
+        nav.mode_since = _finite(t)
+    rover.mode = mode
+    rover.target = _display_target(nav)
+    rover.mission_complete = bool(nav.done)
+    nav.last_cmd = Command(throttle, brake, steer, bool(cmd.pickup))
+
+
+def _display_target(nav):
+    if nav.rock_target is not None and nav.mode in ("sample", "pickup"):
+        return (round(float(nav.rock_target[0]), 1), round(float(nav.rock_target[1]), 1))
+    if nav.path_goal is not None:
+        x, y = grid.cell_to_world(*nav.path_goal[1])
+        return (round(x, 1), round(y, 1))
+    return None
+
+
+# ============================== arbitration ==========================================
+
+def _select_and_run(rover, nav, s):
+    """Highest-priority applicable mode wins; each mode is one function below."""
+    if s.pos is None:
+        return "stop", Command(0.0, BRAKE_STOP if abs(s.vel) > STOPPED_SPEED_MPS else 0.0, 0.0)
+    if s.picking_up or s.near_sample:
+        nav.recovery = None
+        nav.rotate_heading = None
+        return "pickup", mode_pickup(nav, s)
+    if nav.recovery is not None or _check_stuck(nav, s):
+        cmd = mode_stuck(nav, s)
+        if cmd is not None:
+            return "stuck", cmd
+    nav.stuck_since = None if nav.recovery is None else nav.stuck_since
+    if nav.done:
+        return "done", mode_done(nav, s)
+    if nav.rotate_heading is not None:
+        cmd = mode_stop(nav, s)
+        if cmd is not None:
+            return "stop", cmd
+    if _choose_rock(rover, nav, s):
+        return _with_rotation("sample", mode_sample(rover, nav, s), nav)
+    if _should_go_home(rover, nav, s):
+        cmd = mode_home(rover, nav, s)
+        return ("done", cmd) if nav.done else _with_rotation("home", cmd, nav)
+    return _with_rotation("forward", mode_forward(rover, nav, s), nav)
+
+
+def _with_rotation(mode, cmd, nav):
+    """A driving mode may have asked to turn in place this frame: show that as 'stop'."""
+    return ("stop", cmd) if nav.rotate_heading is not None else (mode, cmd)
+
+
+def _check_stuck(nav, s):
+    driving = nav.last_cmd.throttle > 0.05 and nav.last_cmd.brake == 0.0
+    if not nav.progress.update(s.t, s.pos, driving):
+        return False
+    repeat = stuck.count_recent_nearby(nav.stuck_events, s.t, s.pos)
+    nav.stuck_events.append((s.t, s.pos[0], s.pos[1]))
+    if nav.stuck_since is None:
+        nav.stuck_since = s.t - stuck.STUCK_WINDOW_S
+    sign = _escape_side(nav, s)
+    if repeat % 2 == 1:
+        sign = -sign
+    nav.recovery = stuck.Recovery(s.t, sign, repeat)
+    for r, c in stuck.blocked_cells_ahead(s.pos, s.yaw):
+        if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
+            nav.blocked[r, c] = True
+    nav.progress.reset()
+    nav.rotate_heading = None
+    nav.plan_time = -math.inf  # replan around the blocked cells
+    log.info("stuck at (%.1f, %.1f) t=%.1f, repeat %d, escaping %s", s.pos[0], s.pos[1], s.t, repeat,
+             "left" if sign > 0 else "right")
+    return True
+
+
+def _escape_side(nav, s):
+    """Turn toward the goal if it is off to one side, else toward the more open side of the view."""
+    if len(nav.path_xy):
+        pt = nav.path_xy[min(nav.path_idx + 3, len(nav.path_xy) - 1)]
+        a = pursuit.bearing(s.pos, s.yaw, pt)
+        if abs(a) > math.radians(10):
+            return 1.0 if a > 0 else -1.0
+    if s.nav_angles.size:
+        return 1.0 if float(np.mean(s.nav_angles)) >= 0 else -1.0
+    return 1.0
+
+
+# ============================== modes =================================================
+
+def mode_pickup(nav, s):
+    """Stop; request the pickup once when near_sample and stopped; wait while the arm works."""
+    if s.picking_up:
+        return Command(0.0, 0.0, 0.0)
+    if abs(s.vel) > PICKUP_STOP_SPEED_MPS:
+        return Command(0.0, BRAKE_STOP, 0.0)
+    if s.near_sample and s.t - nav.pickup_sent_at >= PICKUP_RETRY_S:
+        nav.pickup_sent_at = s.t
+        if nav.rock_target is None:
+            yaw = math.radians(s.yaw)
+            nav.rock_target = (s.pos[0] + PICKUP_REACH_M * math.cos(yaw), s.pos[1] + PICKUP_REACH_M * math.sin(yaw))
+        log.info("pickup requested at (%.1f, %.1f) t=%.1f", s.pos[0], s.pos[1], s.t)
+        return Command(0.0, BRAKE_STOP, 0.0, pickup=True)
+    return Command(0.0, BRAKE_STOP, 0.0)
+
+
+def mode_stuck(nav, s):
+    """Run the scripted recovery; None when it has finished (the caller picks the next mode)."""
+    if nav.recovery is None:
+        return None
+    out = nav.recovery.command(s.t)
+    if out is None:
+        nav.recovery = None
+        nav.progress.reset()
+        return None
+    _phase, thr, brk, st = out
+    return Command(thr, brk, st)
+
+
+def mode_stop(nav, s):
+    """Brake, then turn in place toward nav.rotate_heading; None when aligned (or timed out)."""
+    err = ((nav.rotate_heading - s.yaw + 180.0) % 360.0) - 180.0
+    if abs(err) <= ROTATE_EXIT_DEG or s.t - nav.rotate_since > ROTATE_TIMEOUT_S:
+        nav.rotate_heading = None
+        return None
+    if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
+        return Command(0.0, BRAKE_STOP, 0.0)
+    steer = STEER_LIMIT_DEG if err > 0 else -STEER_LIMIT_DEG
+    if abs(err) < 20.0:
+        steer *= 0.6  # soften the last degrees to limit overshoot at 45 deg/s
+    return Command(0.0, 0.0, steer)
+
+
+def mode_done(nav, s):
+    """Parked: hold the brake."""
+    return Command(0.0, BRAKE_STOP, 0.0)
+
+
+def mode_forward(rover, nav, s):
+    """Explore: follow a path to the best frontier; without a plan, hug the left wall."""
+    if nav.path_goal is None or nav.path_goal[0] != "frontier" or _needs_replan(nav, s):
+        _plan_explore(rover, nav, s)
+    if nav.path_goal is not None and nav.path_goal[0] == "frontier" and len(nav.path_xy) >= 2:
+        goal_xy = grid.cell_to_world(*nav.path_goal[1])
+        if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M:
+            explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
+            nav.plan_time = -math.inf
+        if _goal_stalled(nav, s):
+            log.info("frontier %s not getting closer: ignoring it", nav.path_goal[1])
+            explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
+            nav.plan_time = -math.inf
+        return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
+    return _wall_follow(nav, s)
+
+
+def mode_sample(rover, nav, s):
+    """Approach the target rock: by camera bearing when visible, else along a planned path."""
+    if s.t - nav.rock_since > SAMPLE_TIMEOUT_S:
+        log.info("giving up rock at (%.1f, %.1f) for now", *nav.rock_target)
+        nav.rock_skip.append((nav.rock_target[0], nav.rock_target[1], s.t + ROCK_SKIP_S))
+        nav.rock_target = None
+        nav.path_goal = None
+        return Command(0.0, BRAKE_STOP, 0.0)
+    if s.t - nav.rock_seen_time <= SAMPLE_VISION_MEMORY_S:
+        alpha, dist = nav.rock_bearing, nav.rock_dist
+        speed = float(np.clip(SAMPLE_SPEED_GAIN * (dist - SAMPLE_STOP_M) + SAMPLE_MIN_SPEED_MPS,
+                              SAMPLE_MIN_SPEED_MPS, SAMPLE_MAX_SPEED_MPS))
+        if abs(math.degrees(alpha)) > SAMPLE_ROTATE_DEG and abs(s.vel) < 1.0:
+            _start_rotation(nav, s, s.yaw + math.degrees(alpha))
+            return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+        steer = float(np.clip(SAMPLE_STEER_GAIN * math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
+        thr, brk = _speed_control(s.vel, speed)
+        return Command(thr, brk, steer)
+    dist = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1])
+    if dist > PATH_END_SLOW_M:
+        goal = grid.world_to_cell(nav.rock_target)
+        if nav.path_goal != ("rock", goal) or _needs_replan(nav, s):
+            _plan_to(rover, nav, s, "rock", goal)
+        if len(nav.path_xy) >= 2:
+            return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=True)
+    alpha = pursuit.bearing(s.pos, s.yaw, nav.rock_target)
+    if abs(math.degrees(alpha)) > SAMPLE_ROTATE_DEG:
+        _start_rotation(nav, s, s.yaw + math.degrees(alpha))
+        return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    steer = float(np.clip(SAMPLE_STEER_GAIN * math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
+    speed = float(np.clip(SAMPLE_SPEED_GAIN * dist, SAMPLE_MIN_SPEED_MPS, SAMPLE_MAX_SPEED_MPS))
+    thr, brk = _speed_control(s.vel, speed)
+    return Command(thr, brk, steer)
+
+
+def mode_home(rover, nav, s):
+    """Plan back to the start, follow the path, park within HOME_STOP_M."""
+    home = nav.home
+    dist = math.hypot(home[0] - s.pos[0], home[1] - s.pos[1])
+    if dist <= HOME_STOP_M:
+        nav.done = True
+        log.info("home at t=%.1f (%.2f m from start)", s.t, dist)
+        return Command(0.0, BRAKE_STOP, 0.0)
+    goal = grid.world_to_cell(home)
+    if nav.path_goal != ("home", goal) or _needs_replan(nav, s):
+        _plan_to(rover, nav, s, "home", goal)
+    if len(nav.path_xy) >= 2 and dist > PATH_END_SLOW_M:
+        return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=True)
+    # last metres: drive straight at the start point
+    alpha = pursuit.bearing(s.pos, s.yaw, home)
+    if abs(math.degrees(alpha)) > ROTATE_ENTER_DEG:
+        _start_rotation(nav, s, s.yaw + math.degrees(alpha))
+        return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    speed = float(np.clip(0.6 * dist, SAMPLE_MIN_SPEED_MPS, 1.5))
+    thr, brk = _speed_control(s.vel, speed)
+    return Command(thr, brk, float(np.clip(math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG)))
+
+
+# ============================== driving helpers ========================================
+
+def _speed_control(vel, target):
+    """(throttle, brake) that move the speed toward `target` (m/s, >= 0)."""
+    err = target - vel
+    if target <= 0.01:
+        return 0.0, (BRAKE_STOP if abs(vel) > 0.05 else 0.0)
+    if err > 0:
+        return float(min(MAX_THROTTLE, THROTTLE_GAIN * err)), 0.0
+    if -err > BRAKE_DEADBAND_MPS:
+        return 0.0, float(min(MAX_BRAKE, BRAKE_GAIN * (-err - BRAKE_DEADBAND_MPS) + 0.2))
+    return 0.0, 0.0
+
+
+def _start_rotation(nav, s, heading_deg):
+    nav.rotate_heading = float(heading_deg) % 360.0
+    nav.rotate_since = s.t
+
+
+def _drive_heading(nav, s, alpha, max_speed):
+    """Drive toward rover-frame bearing `alpha` (rad), avoiding what the camera sees as blocked."""
+    if abs(math.degrees(alpha)) > ROTATE_ENTER_DEG:
+        _start_rotation(nav, s, s.yaw + math.degrees(alpha))
+        return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    reach = reactive.reach_profile(s.nav_angles, s.nav_dists, s.obs_angles, s.obs_dists)
+    heading, clear = reactive.choose_heading(reach, alpha)
+    if clear < REACH_STOP_M:
+        # nothing drivable where we want to go: turn toward the open side (or the goal side)
+        side = np.sign(alpha) if abs(alpha) > math.radians(15) else (
+            np.sign(np.mean(s.nav_angles)) if s.nav_angles.size else 1.0)
+        side = side if side != 0 else 1.0
+        _start_rotation(nav, s, s.yaw + side * BLOCKED_TURN_DEG)
+        return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    look = pursuit.lookahead_for_speed(s.vel)
+    steer = pursuit.steer_for_curvature(2.0 * math.sin(heading) / look, s.vel)
+    turn_frac = min(abs(math.degrees(heading)) / SLOW_TURN_DEG, 1.0)
+    speed = max_speed - (max_speed - MIN_DRIVE_SPEED_MPS) * turn_frac
+    speed = min(speed, max(MIN_DRIVE_SPEED_MPS, REACH_SPEED_GAIN * (clear - REACH_STOP_M) + MIN_DRIVE_SPEED_MPS))
+    thr, brk = _speed_control(s.vel, speed)
+    return Command(thr, brk, steer)
+
+
+def _follow_path(nav, s, max_speed, slow_at_end):
+    """Pure pursuit on nav.path_xy, with reactive correction and end-of-path slowdown."""
+    steer, alpha, pt, idx, remaining = pursuit.pursue(nav.path_xy, s.pos, s.yaw, s.vel, nav.path_idx)
+    nav.path_idx = idx
+    _track_goal_progress(nav, s, remaining)
+    speed = max_speed
+    if slow_at_end:
+        speed = min(speed, max(MIN_DRIVE_SPEED_MPS, 0.8 * remaining))
+    return _drive_heading(nav, s, alpha, speed)
+
+
+def _wall_follow(nav, s):
+    """Fallback without a plan: steer to the left part of the navigable view."""
+    if s.nav_angles.size < FALLBACK_MIN_NAV_PIXELS:
+        _start_rotation(nav, s, s.yaw - BLOCKED_TURN_DEG)
+        return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    wanted = float(np.mean(s.nav_angles) + WALL_BIAS_STD * np.std(s.nav_angles))
+    wanted = float(np.clip(wanted, -math.radians(ROTATE_ENTER_DEG - 5), math.radians(ROTATE_ENTER_DEG - 5)))
+    return _drive_heading(nav, s, wanted, CRUISE_SPEED_MPS)
+
+
+def _track_goal_progress(nav, s, remaining):
+    if remaining < nav.goal_best - GOAL_PROGRESS_M:
+        nav.goal_best = remaining
+        nav.goal_best_time = s.t
+
+
+def _goal_stalled(nav, s):
+    return s.t - nav.goal_best_time > GOAL_PROGRESS_S or nav.loops.circling()
+
+
+def _reset_goal_progress(nav, s):
+    nav.goal_best = math.inf
+    nav.goal_best_time = s.t
+
+
+def _needs_replan(nav, s):
+    if s.t - nav.plan_time >= REPLAN_S or len(nav.path_xy) < 2:
+        return True
+    i = pursuit.closest_index(nav.path_xy, s.pos, nav.path_idx)
+    p = nav.path_xy[i]
+    return math.hypot(p[0] - s.pos[0], p[1] - s.pos[1]) > OFF_PATH_M
+
+
+# ============================== planning ===============================================
+
+def _grids(rover):
+    wm = getattr(rover, "worldmap", None)
+    if not isinstance(wm, np.ndarray) or wm.shape != (grid.GRID_SIZE, grid.GRID_SIZE, 3):
+        wm = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE, 3), np.uint8)
+    return grid.classify(wm)
+
+
+def _start_cell(cost, s):
+    cell = grid.world_to_cell(s.pos)
+    return grid.nearest_passable(cost, cell) if cell is not None else None
+
+
+def _set_path(nav, s, kind, goal, cells):
+    if nav.path_goal is None or nav.path_goal[0] != kind or nav.path_goal[1] != goal:
+        _reset_goal_progress(nav, s)
+        nav.loops.reset()
+    nav.path_goal = (kind, goal) if goal is not None else None
+    nav.path_xy = astar.cells_to_world(cells)
+    nav.path_idx = 0
+    nav.plan_time = s.t
+
+
+def _plan_explore(rover, nav, s):
+    """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
+    free, obstacle, unknown = _grids(rover)
+    cost = grid.cost_grid(free, obstacle, nav.blocked, allow_unknown=False)
+    cell = grid.world_to_cell(s.pos)
+    # the rover's own cell may be unmapped yet (first frames) or next to a wall
+    for r in range(max(cell[0] - 1, 0), min(cell[0] + 2, grid.GRID_SIZE)):
+        for c in range(max(cell[1] - 1, 0), min(cell[1] + 2, grid.GRID_SIZE)):
+            if not nav.blocked[r, c] and not np.isfinite(cost[r, c]):
+                cost[r, c] = grid.UNKNOWN_COST
+    dist, parent = astar.distance_field(cost, cell)
+    mask = explore.frontier_mask(free, unknown, nav.frontier_ignored)
+    targets = explore.frontier_targets(mask, dist)
+    nav.frontier_count = len(targets)
+    current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "frontier" else None
+    goal = explore.choose_target(targets, s.pos, s.yaw, current)
+    if goal is None:
+        nav.explored = s.t > 5.0  # an empty map on the first frames is not a finished one
+        _set_path(nav, s, "frontier", None, [])
+        return
+    nav.explored = False
+    _set_path(nav, s, "frontier", goal, astar.path_to(parent, cost.shape, goal))
+
+
+def _plan_to(rover, nav, s, kind, goal):
+    """A* to a fixed goal cell (rock, home), allowed through unmapped ground at a premium."""
+    free, obstacle, _unknown = _grids(rover)
+    cost = grid.cost_grid(free, obstacle, nav.blocked, allow_unknown=True)
+    start = _start_cell(cost, s)
+    g = goal if np.isfinite(cost[goal]) else grid.nearest_passable(cost, goal)
+    cells = astar.astar(cost, start, g) if (start is not None and g is not None) else []
+    if not cells:
+        cells = [grid.world_to_cell(s.pos), goal]
+    _set_path(nav, s, kind, goal, cells)
+
+
+# ============================== goals ==================================================
+
+def _rock_is_known_done(nav, xy, t):
+    for c in nav.collected:
+        if math.hypot(xy[0] - c[0], xy[1] - c[1]) < ROCK_SAME_M:
+            return True
+    for x, y, until in nav.rock_skip:
+        if t < until and math.hypot(xy[0] - x, xy[1] - y) < ROCK_SAME_M:
+            return True
+    return False
+
+
+def _choose_rock(rover, nav, s):
+    """Pick (or keep) the rock to approach: visible ones first, then remembered ones. True if any."""
+    if s.samples_remaining == 0:
+        nav.rock_target = None
+        return False
+    yaw = math.radians(s.yaw)
+    if s.rock_angles.size >= ROCK_MIN_PIXELS:
+        dist = float(np.min(s.rock_dists))
+        ang = float(np.mean(s.rock_angles[s.rock_dists <= dist + ROCK_SAME_M / 2]))  # nearest blob only
+        xy = (s.pos[0] + dist * math.cos(yaw + ang), s.pos[1] + dist * math.sin(yaw + ang))
+        same = nav.rock_target is not None and math.hypot(xy[0] - nav.rock_target[0],
+                                                          xy[1] - nav.rock_target[1]) < ROCK_SAME_M
+        nearer = nav.rock_target is not None and dist < math.hypot(
+            nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1]) - ROCK_SAME_M
+        if dist <= ROCK_CHASE_M and not _rock_is_known_done(nav, xy, s.t) and (
+                nav.rock_target is None or same or nearer):
+            if nav.rock_target is None:
+                nav.rock_since = s.t
+            nav.rock_target = xy
+            nav.rock_seen_time = s.t
+            nav.rock_bearing, nav.rock_dist = ang, dist
+            return True
+    if nav.rock_target is not None:
+        if _rock_is_known_done(nav, nav.rock_target, s.t):
+            nav.rock_target = None
+        else:
+            return True
+    best, best_d = None, math.inf
+    for xy in list(getattr(rover, "rocks_world", []) or []):
+        try:
+            xy = (float(xy[0]), float(xy[1]))
+        except (TypeError, ValueError, IndexError):
+            continue
+        if not (math.isfinite(xy[0]) and math.isfinite(xy[1])) or _rock_is_known_done(nav, xy, s.t):
+            continue
+        d = math.hypot(xy[0] - s.pos[0], xy[1] - s.pos[1])
+        if d < best_d:
+            best, best_d = xy, d
+    if best is not None and (best_d <= ROCK_DETOUR_M or nav.explored):
+        nav.rock_target = best
+        nav.rock_since = s.t
+        nav.rock_seen_time = -math.inf
+        return True
+    return False
+
+
+def _should_go_home(rover, nav, s):
+    """Home when all samples are in and the map is done, or when time is running out."""
+    if nav.home is None:
+        return False
+    if nav.path_goal is not None and nav.path_goal[0] == "home":
+        return True
+    home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
+    if s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS > HOME_BY_S:
+        log.info("time is running out at t=%.1f: going home", s.t)
+        return True
+    if not nav.explored:
+        return False
+    if s.samples_remaining is not None and s.samples_remaining > 0 and SECOND_SWEEP and not nav.second_sweep_done:
+        log.info("map complete with %d samples missing: second sweep", s.samples_remaining)
+        nav.second_sweep_done = True
+        nav.frontier_ignored[:] = False
+        nav.explored = False
+        return False
+    return True

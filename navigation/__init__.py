@@ -1,0 +1,7 @@
+"""Planning helpers for the rover's decision layer.
+
+Pure functions over the 200x200 worldmap (1 m cells, [row=y, col=x]):
+occupancy and cost grids (`grid`), shortest paths (`astar`), path following
+(`pursuit`), steering from the current camera frame (`reactive`), exploration
+targets and loop detection (`explore`) and lack-of-progress recovery (`stuck`).
+"""

@@ -1,0 +1,151 @@
+"""Systematic exploration: frontier targets, loop/revisit detection, map completeness.
+
+A frontier is a mapped-navigable cell touching unmapped ground. One Dijkstra
+from the rover ranks every frontier cluster by true path cost, so the rover
+works through the canyon tree depth first (nearest unexplored branch next)
+instead of wandering. Frontiers the rover reached without resolving (cells the
+camera cannot see) are ignored so they never pull it back.
+"""
+from collections import deque
+
+import cv2
+import numpy as np
+
+FRONTIER_MIN_CELLS = 3  # smaller frontier clusters are noise, cells
+HEADING_WEIGHT_M_PER_RAD = 4.0  # extra cost per radian a target lies off the current heading, m/rad
+SIZE_BONUS_M_PER_CELL = 0.3  # cost discount per frontier cell (bigger = more to see), m
+SIZE_BONUS_CAP_CELLS = 20  # clusters larger than this get no further bonus, cells
+KEEP_TARGET_MARGIN_M = 6.0  # a new target must be this much cheaper to replace the current one, m
+IGNORE_RADIUS_M = 3.0  # frontier cells within this of an abandoned target are ignored, m
+CIRCLE_WINDOW_S = 15.0  # window for circling detection, s
+CIRCLE_TURN_DEG = 400.0  # net heading change within the window that means circling, degrees
+CIRCLE_MAX_SPAN_M = 10.0  # ...while staying within a box this size, m
+REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
+
+
+def frontier_mask(free, unknown, ignored=None):
+    """Navigable cells 8-adjacent to unknown cells (minus ignored ones)."""
+    grown = cv2.dilate(unknown.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    mask = free & grown
+    mask[0, :] = mask[-1, :] = mask[:, 0] = mask[:, -1] = False
+    if ignored is not None:
+        mask &= ~ignored
+    return mask
+
+
+def frontier_targets(mask, dist):
+    """Reachable frontier clusters as a structured list: one (row, col, path_cost, size) per cluster.
+
+    The target cell of a cluster is its cell with the lowest path cost.
+    """
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    rows, cols = np.nonzero(mask)
+    if rows.size == 0:
+        return np.zeros((0, 4))
+    lab = labels[rows, cols]
+    d = dist[rows, cols]
+    ok = np.isfinite(d) & (stats[lab, cv2.CC_STAT_AREA] >= FRONTIER_MIN_CELLS)
+    if not ok.any():
+        return np.zeros((0, 4))
+    rows, cols, lab, d = rows[ok], cols[ok], lab[ok], d[ok]
+    order = np.lexsort((d, lab))
+    first = np.ones(order.size, bool)
+    first[1:] = lab[order][1:] != lab[order][:-1]
+    pick = order[first]
+    sizes = stats[lab[pick], cv2.CC_STAT_AREA].astype(np.float64)
+    return np.stack([rows[pick], cols[pick], d[pick], sizes], axis=1).astype(np.float64)
+
+
+def score_targets(targets, pos, yaw_deg):
+    """Lower is better: path cost + heading change penalty - size bonus."""
+    if len(targets) == 0:
+        return np.zeros(0)
+    tx = targets[:, 1] + 0.5
+    ty = targets[:, 0] + 0.5
+    ang = np.arctan2(ty - pos[1], tx - pos[0]) - np.radians(yaw_deg)
+    off = np.abs((ang + np.pi) % (2 * np.pi) - np.pi)
+    bonus = SIZE_BONUS_M_PER_CELL * np.minimum(targets[:, 3], SIZE_BONUS_CAP_CELLS)
+    return targets[:, 2] + HEADING_WEIGHT_M_PER_RAD * off - bonus
+
+
+def choose_target(targets, pos, yaw_deg, current=None):
+    """Best frontier cell (row, col), keeping `current` unless a clearly better one exists."""
+    if len(targets) == 0:
+        return None
+    scores = score_targets(targets, pos, yaw_deg)
+    best = int(np.argmin(scores))
+    if current is not None:
+        d = np.hypot(targets[:, 0] - current[0], targets[:, 1] - current[1])
+        near = d <= IGNORE_RADIUS_M
+        if near.any():
+            cur_score = scores[near].min()
+            if cur_score <= scores[best] + KEEP_TARGET_MARGIN_M:
+                k = np.nonzero(near)[0][int(np.argmin(scores[near]))]
+                return int(targets[k, 0]), int(targets[k, 1])
+    return int(targets[best, 0]), int(targets[best, 1])
+
+
+def ignore_disc(ignored, cell, radius=IGNORE_RADIUS_M):
+    """Mark a disc of cells around `cell` as ignored frontier (in place)."""
+    cv2.circle(ignored.view(np.uint8), (int(cell[1]), int(cell[0])), int(np.ceil(radius)), 1, -1)
+    return ignored
+
+
+def map_complete(targets):
+    """The map is complete when no reachable frontier cluster is left."""
+    return len(targets) == 0
+
+
+class LoopDetector:
+    """Detects circling: large accumulated heading change while staying in a small area."""
+
+    def __init__(self):
+        self.hist = deque()  # (t, x, y, unwrapped yaw deg)
+        self._unwrapped = None
+        self._last_yaw = None
+
+    def update(self, t, pos, yaw_deg):
+        if not (np.isfinite(t) and np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
+            return False
+        if self._last_yaw is None:
+            self._unwrapped = float(yaw_deg)
+        else:
+            self._unwrapped += ((yaw_deg - self._last_yaw + 180.0) % 360.0) - 180.0
+        self._last_yaw = float(yaw_deg)
+        self.hist.append((t, pos[0], pos[1], self._unwrapped))
+        while self.hist and t - self.hist[0][0] > CIRCLE_WINDOW_S:
+            self.hist.popleft()
+        return self.circling()
+
+    def circling(self):
+        if len(self.hist) < 3:
+            return False
+        h = np.asarray(self.hist)
+        turn = abs(h[-1, 3] - h[0, 3])
+        span = max(np.ptp(h[:, 1]), np.ptp(h[:, 2]))
+        return bool(turn >= CIRCLE_TURN_DEG and span <= CIRCLE_MAX_SPAN_M)
+
+    def reset(self):
+        self.hist.clear()
+
+
+class VisitMap:
+    """When each cell was last driven over; tells fresh ground from revisits."""
+
+    def __init__(self, shape=(200, 200)):
+        self.last_visit = np.full(shape, -np.inf, np.float32)
+        self.revisit_frames = 0  # frames spent on cells left more than REVISIT_AGE_S ago
+        self.frames = 0
+
+    def update(self, t, cell):
+        if cell is None:
+            return False
+        self.frames += 1
+        last = self.last_visit[cell]
+        revisit = bool(np.isfinite(last) and t - last > REVISIT_AGE_S)
+        self.revisit_frames += revisit
+        self.last_visit[cell] = t
+        return revisit
+
+    def visited(self):
+        return np.isfinite(self.last_visit)

@@ -1,0 +1,94 @@
+"""Free-space profile of the current camera frame, for reactive obstacle avoidance.
+
+The map can be wrong or stale; the current frame is not. Per angular bin we
+estimate how far the ground stays navigable (nav pixels reach, cut short by
+the nearest obstacle pixels) and pick the clear heading closest to the one
+the planner wants.
+"""
+import numpy as np
+
+BIN_DEG = 3.0  # angular bin width, degrees
+FOV_HALF_DEG = 60.0  # profile covers +-this angle, degrees
+MIN_PIXELS = 3  # a bin needs this many nav pixels to count as seen
+MIN_OBS_PIXELS = 4  # obstacle pixels in a bin needed to cut its reach
+NEAR_IGNORE_M = 0.5  # nav/obstacle pixels closer than this are ignored (projection noise), m
+ROVER_HALF_WIDTH_BINS = 2  # bins either side that must also be clear (rover width), bins
+CLEAR_REACH_M = 3.0  # reach at which a heading counts as fully clear, m
+TURN_PENALTY_M_PER_RAD = 2.0  # reach given up per radian of deviation from the wanted heading, m/rad
+
+
+def bin_centres():
+    """Centres of the profile's bins, radians."""
+    n = int(round(2 * FOV_HALF_DEG / BIN_DEG))
+    return np.radians(-FOV_HALF_DEG + BIN_DEG * (np.arange(n) + 0.5))
+
+
+def _bin_index(angles):
+    n = int(round(2 * FOV_HALF_DEG / BIN_DEG))
+    idx = np.floor((np.degrees(angles) + FOV_HALF_DEG) / BIN_DEG).astype(np.int64)
+    ok = (idx >= 0) & (idx < n)
+    return idx, ok, n
+
+
+def reach_profile(nav_angles, nav_dists, obs_angles=None, obs_dists=None):
+    """Per-bin free distance (m) in the current frame; 0 where no ground is seen."""
+    nav_angles = np.asarray(nav_angles, dtype=np.float64).ravel()
+    nav_dists = np.asarray(nav_dists, dtype=np.float64).ravel()
+    m = min(nav_angles.size, nav_dists.size)
+    nav_angles, nav_dists = nav_angles[:m], nav_dists[:m]
+    good = np.isfinite(nav_angles) & np.isfinite(nav_dists) & (nav_dists > NEAR_IGNORE_M)
+    idx, ok, n = _bin_index(nav_angles[good])
+    d = nav_dists[good][ok]
+    idx = idx[ok]
+    counts = np.bincount(idx, minlength=n)
+    reach = np.zeros(n)
+    np.maximum.at(reach, idx, d)
+    reach[counts < MIN_PIXELS] = 0.0
+    if obs_angles is not None and obs_dists is not None:
+        oa = np.asarray(obs_angles, dtype=np.float64).ravel()
+        od = np.asarray(obs_dists, dtype=np.float64).ravel()
+        k = min(oa.size, od.size)
+        oa, od = oa[:k], od[:k]
+        g = np.isfinite(oa) & np.isfinite(od) & (od > NEAR_IGNORE_M)
+        oidx, ook, _ = _bin_index(oa[g])
+        oidx, od = oidx[ook], od[g][ook]
+        ocount = np.bincount(oidx, minlength=n)
+        omin = np.full(n, np.inf)
+        np.minimum.at(omin, oidx, od)
+        cut = ocount >= MIN_OBS_PIXELS
+        reach[cut] = np.minimum(reach[cut], omin[cut])
+    return reach
+
+
+def width_limited(reach):
+    """Reach of a rover-wide corridor per heading: min over neighbouring bins."""
+    k = ROVER_HALF_WIDTH_BINS
+    if reach.size == 0:
+        return reach
+    padded = np.pad(reach, k, constant_values=0.0)
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * k + 1)
+    return windows.min(axis=1)
+
+
+def choose_heading(reach, wanted_rad):
+    """Heading (rad) nearest `wanted_rad` with the most clear corridor, and that corridor's reach (m)."""
+    centres = bin_centres()
+    corridor = width_limited(np.asarray(reach, dtype=np.float64))
+    if corridor.size == 0 or not np.isfinite(wanted_rad):
+        return 0.0, 0.0
+    score = np.minimum(corridor, CLEAR_REACH_M) - TURN_PENALTY_M_PER_RAD * np.abs(centres - wanted_rad)
+    k = int(np.argmax(score))
+    j = int(np.argmin(np.abs(centres - wanted_rad)))
+    if corridor[j] >= CLEAR_REACH_M and abs(centres[j] - wanted_rad) <= np.radians(BIN_DEG):
+        return float(wanted_rad), float(corridor[j])
+    return float(centres[k]), float(corridor[k])
+
+
+def reach_at(reach, angle_rad):
+    """Corridor reach (m) straight along `angle_rad`."""
+    centres = bin_centres()
+    corridor = width_limited(np.asarray(reach, dtype=np.float64))
+    if corridor.size == 0:
+        return 0.0
+    j = int(np.argmin(np.abs(centres - angle_rad)))
+    return float(corridor[j])

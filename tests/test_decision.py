@@ -1,0 +1,216 @@
+"""Behaviour of decision.decision_step: modes, stuck recovery, pickup safety, sane commands."""
+import math
+
+import numpy as np
+import pytest
+
+import decision
+from rover_state import RoverState
+
+DT = 0.04  # twin telemetry period, s
+
+
+@pytest.fixture(autouse=True)
+def no_internal_errors(caplog):
+    """decision_step swallows exceptions to keep servers alive; tests must still see them."""
+    yield
+    errors = [r for r in caplog.records if r.name == "decision" and r.levelname == "ERROR"]
+    assert not errors, errors[0].getMessage()
+
+
+def clear_view(n=2000, spread=0.6, far=8.0, seed=0):
+    """Navigable pixels of an open floor ahead (rover frame, radians / metres)."""
+    rng = np.random.default_rng(seed)
+    return rng.uniform(-spread, spread, n), rng.uniform(1.0, far, n)
+
+
+def make_rover(pos=(100.0, 85.0), yaw=0.0, t=10.0):
+    r = RoverState()
+    r.pos, r.yaw, r.total_time, r.vel = pos, yaw, t, 0.0
+    r.start_pos = (100.0, 85.0)
+    r.samples_remaining, r.samples_initial = 6, 6
+    r.nav_angles, r.nav_dists = clear_view()
+    # a mapped corridor with walls north, south and west: the only frontier is east, ahead
+    r.worldmap[80:91, 90:130, 2] = 255
+    r.worldmap[79, 89:131, 0] = 255
+    r.worldmap[91, 89:131, 0] = 255
+    r.worldmap[79:92, 89, 0] = 255
+    return r
+
+
+def assert_sane(r):
+    for v in (r.throttle, r.brake, r.steer):
+        assert math.isfinite(v)
+    assert -15.0 <= r.steer <= 15.0
+    assert -1.0 <= r.throttle <= 1.0
+    assert r.brake >= 0.0
+
+
+def test_first_frame_defaults_are_safe():
+    r = RoverState()
+    decision.decision_step(r)
+    assert_sane(r)
+    assert r.send_pickup is False
+    assert r.throttle <= 0.0
+
+
+@pytest.mark.parametrize("field,value", [
+    ("pos", (np.nan, np.nan)), ("pos", None), ("yaw", np.nan), ("vel", np.inf), ("total_time", np.nan),
+    ("nav_angles", np.array([np.nan, 0.1])), ("nav_dists", np.zeros(0)), ("worldmap", None),
+    ("rock_angles", np.array([0.1, 0.2, 0.3, 0.4])), ("samples_remaining", "x"),
+])
+def test_degenerate_inputs_never_nan(field, value):
+    r = make_rover()
+    setattr(r, field, value)
+    for k in range(5):
+        r.total_time = 10.0 + k * DT if field != "total_time" else value
+        decision.decision_step(r)
+        assert_sane(r)
+    assert r.mode in ("forward", "stop", "stuck", "sample", "pickup", "home", "done")
+
+
+def test_empty_view_turns_in_place_not_forward():
+    r = make_rover()
+    r.nav_angles, r.nav_dists = np.zeros(0), np.zeros(0)
+    r.worldmap[:] = 0
+    decision.decision_step(r)
+    assert_sane(r)
+    assert r.throttle <= 0.0
+    assert r.mode == "stop"
+    assert abs(r.steer) > 0 or r.brake > 0
+
+
+def test_drives_forward_on_open_floor():
+    r = make_rover()
+    for k in range(10):
+        r.total_time = 10 + k * DT
+        decision.decision_step(r)
+    assert r.mode == "forward"
+    assert r.throttle > 0 and r.brake == 0
+
+
+def run_blocked(r, seconds, start_t=10.0):
+    """Frames with the rover pinned in place while the view ahead stays clear."""
+    modes, cmds = [], []
+    n = int(seconds / DT)
+    for k in range(n):
+        r.total_time = start_t + k * DT
+        decision.decision_step(r)
+        assert_sane(r)
+        modes.append(r.mode)
+        cmds.append((r.throttle, r.brake, r.steer))
+    return modes, cmds
+
+
+def test_no_progress_with_throttle_becomes_stuck_then_backs_off_and_turns():
+    r = make_rover()
+    modes, cmds = run_blocked(r, 3.0 + 4.5)
+    assert "stuck" in modes
+    first = modes.index("stuck")
+    # not before the detection window has elapsed
+    assert first * DT >= decision.stuck.STUCK_WINDOW_S - 2 * DT
+    during = [c for m, c in zip(modes[first:], cmds[first:]) if m == "stuck"]
+    assert during[0][0] < 0, "recovery starts by reversing"
+    turning = [c for c in during if c[0] == 0 and c[1] == 0 and abs(c[2]) == 15]
+    assert turning, "recovery turns in place at full lock"
+    # the cells the rover pushed against are remembered as blocked
+    assert r.nav.blocked.any()
+
+
+def test_moving_rover_is_not_stuck():
+    r = make_rover()
+    for k in range(200):
+        r.total_time = 10 + k * DT
+        r.pos = (100.0 + 0.08 * k, 85.0)
+        r.vel = 2.0
+        decision.decision_step(r)
+        assert r.mode != "stuck"
+
+
+def test_pickup_only_when_near_and_stopped():
+    r = make_rover()
+    r.near_sample = True
+    r.vel = 1.2
+    decision.decision_step(r)
+    assert r.mode == "pickup"
+    assert r.send_pickup is False
+    assert r.brake > 0 and r.throttle == 0
+    r.vel = 0.0
+    r.total_time += DT
+    decision.decision_step(r)
+    assert r.send_pickup is True
+    # no repeat request on the next frames while the simulator starts the arm
+    r.total_time += DT
+    decision.decision_step(r)
+    assert r.send_pickup is False
+    r.picking_up = True
+    for k in range(20):
+        r.total_time += DT
+        decision.decision_step(r)
+        assert r.mode == "pickup" and r.send_pickup is False and r.throttle == 0
+
+
+def test_never_requests_pickup_when_not_near():
+    r = make_rover()
+    for k in range(100):
+        r.total_time = 10 + k * DT
+        r.vel = 0.0
+        decision.decision_step(r)
+        assert r.send_pickup is False
+
+
+def test_rock_in_view_switches_to_sample_and_steers_toward_it():
+    r = make_rover()
+    r.rock_angles = np.full(6, math.radians(10))
+    r.rock_dists = np.full(6, 4.0)
+    r.vel = 0.5
+    decision.decision_step(r)
+    assert r.mode == "sample"
+    assert r.steer > 0
+    assert r.target is not None
+    r.rock_angles = np.full(6, math.radians(-10))
+    r.total_time += DT
+    decision.decision_step(r)
+    assert r.steer < 0
+
+
+def test_after_pickup_returns_to_exploring_and_forgets_the_rock():
+    r = make_rover()
+    r.rock_angles, r.rock_dists = np.full(6, 0.1), np.full(6, 1.0)
+    decision.decision_step(r)
+    assert r.mode == "sample"
+    r.rock_angles, r.rock_dists = np.zeros(0), np.zeros(0)
+    r.near_sample, r.picking_up = True, True
+    r.total_time += DT
+    decision.decision_step(r)
+    assert r.mode == "pickup"
+    r.near_sample, r.picking_up, r.samples_remaining = False, False, 5
+    r.rocks_world = [r.nav.rock_target]  # perception still remembers it
+    for k in range(5):
+        r.total_time += DT
+        decision.decision_step(r)
+    assert r.mode in ("forward", "stop")
+    assert len(r.nav.collected) == 1
+
+
+def test_goes_home_when_done_and_parks():
+    r = make_rover(pos=(110.0, 85.0))
+    r.samples_remaining = 0
+    r.worldmap[:] = 0
+    r.worldmap[80:91, 90:130, 2] = 255  # fully enclosed: no frontier
+    r.worldmap[79, 89:131, 0] = 255
+    r.worldmap[91, 89:131, 0] = 255
+    r.worldmap[79:92, 89, 0] = 255
+    r.worldmap[79:92, 130, 0] = 255
+    r.yaw = 180.0
+    for k in range(3):  # one frame to find no frontier left, then home
+        r.total_time += DT
+        decision.decision_step(r)
+    assert r.mode == "home"
+    assert r.target is not None and abs(r.target[0] - 100.5) < 1.5
+    r.pos = (100.3, 85.2)
+    r.total_time += DT
+    decision.decision_step(r)
+    assert r.mode == "done"
+    assert r.brake > 0 and r.throttle == 0
+    assert r.mission_complete

@@ -1,0 +1,142 @@
+"""Planning helpers on synthetic maps: grids, A*, pure pursuit, reactive profile, frontiers, stuck."""
+import math
+
+import numpy as np
+
+from navigation import astar, explore, grid, pursuit, reactive, stuck
+
+
+def corridor_map():
+    """Worldmap with a wall across x=100 that has one gap at y 150..155."""
+    wm = np.zeros((200, 200, 3), np.uint8)
+    wm[20:180, 20:180, 2] = 255
+    wm[20:180, 100, 2] = 0
+    wm[20:180, 100, 0] = 255
+    wm[150:156, 100, 0] = 0
+    wm[150:156, 100, 2] = 255
+    return wm
+
+
+def test_classify_splits_free_obstacle_unknown():
+    free, obst, unknown = grid.classify(corridor_map())
+    assert free[50, 50] and not obst[50, 50]
+    assert obst[50, 100] and not free[50, 100]
+    assert unknown[5, 5]
+    assert not (free & obst).any()
+
+
+def test_cost_grid_is_impassable_on_obstacles_and_dearer_near_them():
+    free, obst, _ = grid.classify(corridor_map())
+    cost = grid.cost_grid(free, obst)
+    assert np.isinf(cost[50, 100])
+    assert np.isinf(cost[5, 5]), "unknown is impassable unless allowed"
+    assert cost[50, 99] > cost[50, 90] >= grid.FREE_COST
+    cost_u = grid.cost_grid(free, obst, allow_unknown=True)
+    assert np.isfinite(cost_u[5, 5])
+
+
+def test_astar_goes_through_the_gap():
+    free, obst, _ = grid.classify(corridor_map())
+    cost = grid.cost_grid(free, obst)
+    path = astar.astar(cost, (50, 50), (50, 150))
+    assert path[0] == (50, 50) and path[-1] == (50, 150)
+    rows_at_wall = [r for r, c in path if c == 100]
+    assert rows_at_wall and all(150 <= r <= 155 for r in rows_at_wall)
+    steps = np.abs(np.diff(np.asarray(path), axis=0))
+    assert steps.max() <= 1
+
+
+def test_astar_reports_no_path():
+    cost = np.ones((50, 50), np.float32)
+    cost[:, 25] = np.inf
+    assert astar.astar(cost, (10, 10), (10, 40)) == []
+
+
+def test_distance_field_matches_astar_length():
+    free, obst, _ = grid.classify(corridor_map())
+    cost = grid.cost_grid(free, obst)
+    dist, parent = astar.distance_field(cost, (50, 50))
+    p1 = astar.path_to(parent, cost.shape, (50, 150))
+    p2 = astar.astar(cost, (50, 50), (50, 150))
+    assert len(p1) > 0 and abs(astar.path_length(p1) - astar.path_length(p2)) < 3.0
+
+
+def test_pursuit_steers_left_for_a_path_to_the_left():
+    path = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [3.0, 3.0], [4.0, 4.0]])
+    steer, alpha, *_ = pursuit.pursue(path, (0.0, 0.0), 0.0, 1.0)
+    assert steer > 0 and alpha > 0
+    steer, alpha, *_ = pursuit.pursue(path * [1, -1], (0.0, 0.0), 0.0, 1.0)
+    assert steer < 0 and alpha < 0
+    steer, alpha, *_ = pursuit.pursue(np.array([[0, 0], [5.0, 0.0]]), (0.0, 0.0), 0.0, 1.0)
+    assert abs(steer) < 1e-6
+
+
+def test_steer_command_grows_with_speed_for_the_same_curvature():
+    slow = pursuit.steer_for_curvature(0.05, 0.5)
+    fast = pursuit.steer_for_curvature(0.05, 4.5)
+    assert 0 < slow < fast <= 15.0
+    assert pursuit.steer_for_curvature(10.0, 0.0) == 15.0
+    assert pursuit.steer_for_curvature(float("nan"), 1.0) == 0.0
+
+
+def test_reactive_profile_avoids_a_blocked_centre():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(-0.8, 0.8, 5000)
+    d = rng.uniform(0.8, 8.0, 5000)
+    keep = ~((np.abs(a) < 0.2) & (d > 1.5))  # a rock 1.5 m ahead hides the floor behind it
+    reach = reactive.reach_profile(a[keep], d[keep])
+    heading, clear = reactive.choose_heading(reach, 0.0)
+    assert abs(heading) > 0.15 and clear >= reactive.CLEAR_REACH_M
+    heading, clear = reactive.choose_heading(reactive.reach_profile(a, d), 0.0)
+    assert heading == 0.0
+    assert reactive.choose_heading(reactive.reach_profile([], []), 0.0)[1] == 0.0
+
+
+def test_frontiers_are_mapped_cells_next_to_unknown_and_ranked_by_path():
+    wm = np.zeros((200, 200, 3), np.uint8)
+    wm[90:111, 50:151, 2] = 255  # open strip
+    wm[89, 50:151, 0] = wm[111, 50:151, 0] = 255  # walls north and south
+    free, obst, unknown = grid.classify(wm)
+    mask = explore.frontier_mask(free, unknown)
+    assert mask[100, 50] and mask[100, 150] and not mask[100, 100]
+    cost = grid.cost_grid(free, obst)
+    dist, _ = astar.distance_field(cost, (100, 95))
+    targets = explore.frontier_targets(mask, dist)
+    assert len(targets) == 2
+    goal = explore.choose_target(targets, (95.5, 100.5), 0.0)
+    assert goal[1] == 150, "heading east, the east frontier wins though slightly further"
+    goal = explore.choose_target(targets, (95.5, 100.5), 180.0)
+    assert goal[1] == 50
+    ignored = np.zeros((200, 200), bool)
+    explore.ignore_disc(ignored, (100, 50), radius=12)
+    explore.ignore_disc(ignored, (100, 150), radius=12)
+    assert explore.map_complete(explore.frontier_targets(explore.frontier_mask(free, unknown, ignored), dist))
+
+
+def test_loop_detector_flags_circling_but_not_a_straight_drive():
+    det = explore.LoopDetector()
+    flagged = False
+    for k in range(300):
+        t = k * 0.04
+        yaw = (k * 2.0) % 360
+        flagged |= det.update(t, (100 + 2 * math.cos(math.radians(yaw)), 100 + 2 * math.sin(math.radians(yaw))), yaw)
+    assert flagged
+    det = explore.LoopDetector()
+    assert not any(det.update(k * 0.04, (100 + 0.1 * k, 100), 0.0) for k in range(300))
+
+
+def test_progress_monitor_and_recovery_script():
+    mon = stuck.ProgressMonitor()
+    hits = [mon.update(k * 0.04, (10.0, 10.0), True) for k in range(100)]
+    assert not any(hits[:70]) and hits[-1]
+    mon.reset()
+    assert not any(mon.update(k * 0.04, (10 + 0.05 * k, 10.0), True) for k in range(200))
+    assert not any(mon.update(k * 0.04, (10.0, 10.0), False) for k in range(200))
+    rec = stuck.Recovery(0.0, turn_sign=1.0)
+    phases = [rec.command(t)[0] for t in np.arange(0, 3.0, 0.1) if rec.command(t)]
+    assert phases[0] == "back" and "turn" in phases
+    back = rec.command(0.1)
+    assert back[1] < 0 and back[3] < 0, "reversing with right lock swings the nose left"
+    assert rec.command(100.0) is None
+    cells = stuck.blocked_cells_ahead((50.0, 50.0), 0.0)
+    assert (cells[:, 1] >= 50).all() and len(cells) >= 2
