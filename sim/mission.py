@@ -1,0 +1,364 @@
+"""Run one full mission of the autonomy client on the twin and score it.
+
+    python -m sim.mission --seed N [--world real|procedural:K|PNG] [--time-limit S]
+                          [--video out.mp4] [--out DIR] [--record DIR] [--wire]
+
+Default: `AutonomyClient` in-process against `RoverTwin` (fast, simulated clock via
+the twin's `sim_time`).  `--wire`: `drive_rover.py` runs as a subprocess on a free
+port and the twin talks to it over the real Socket.IO wire protocol, exactly like
+the Unity program (lockstep).
+
+Writes `<out>/mission.json` (atomic) and `<out>/mission.png` (worldmap vs truth,
+trajectory, samples, start).  Mapped/fidelity/located use
+`evaluation.metrics.score_map` on the client's worldmap; collected, returned
+home, time and stuck figures come from the twin's ground truth.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import tempfile
+import time
+from collections import deque
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+TIME_LIMIT_S = 900.0  # simulated seconds before a mission is stopped
+HOME_RADIUS_M = 3.0  # "returned home": within this of the start after collecting all
+STUCK_SPEED = 0.2  # m/s, below this while commanding throttle counts as stuck
+STUCK_THROTTLE = 0.05  # |throttle| above this is "commanding throttle"
+PROGRESS_WINDOW_S = 10.0  # s, no-progress window
+PROGRESS_MIN_M = 0.5  # m, moving less than this over the window (not picking up) = stuck
+MAP_PNG_SCALE = 4  # px per metre in the mission PNG
+DEFAULT_OUT_ROOT = "out"  # default output folder root
+
+
+# ----------------------------------------------------------------------------- helpers
+def write_json_atomic(path, obj) -> None:
+    """Write JSON via a temp file + os.replace (never a half-written file)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(obj, fh, indent=1, default=_json_default)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def write_png_atomic(path, bgr) -> None:
+    import cv2
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ok, buf = cv2.imencode(".png", bgr)
+    if not ok:
+        raise ValueError(f"cannot encode PNG for {path}")
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_bytes(buf.tobytes())
+    os.replace(tmp, path)
+
+
+def _nan_to_none(v):
+    return None if isinstance(v, float) and not math.isfinite(v) else v
+
+
+class StuckMeter:
+    """Truth-based stuck time: slow while commanding throttle, or no progress over a window."""
+
+    def __init__(self):
+        self.total_s = 0.0
+        self.longest_s = 0.0
+        self._run_s = 0.0
+        self._hist = deque()  # (t, x, y, picking)
+
+    def update(self, t, dt, x, y, v, throttle, picking):
+        self._hist.append((t, x, y, picking))
+        while self._hist and self._hist[0][0] < t - PROGRESS_WINDOW_S:
+            self._hist.popleft()
+        slow = abs(throttle) > STUCK_THROTTLE and abs(v) < STUCK_SPEED
+        no_progress = False
+        if t >= PROGRESS_WINDOW_S and not any(h[3] for h in self._hist):
+            x0, y0 = self._hist[0][1], self._hist[0][2]
+            no_progress = math.hypot(x - x0, y - y0) < PROGRESS_MIN_M
+        if (slow or no_progress) and not picking:
+            self.total_s += dt
+            self._run_s += dt
+            self.longest_s = max(self.longest_s, self._run_s)
+        else:
+            self._run_s = 0.0
+
+
+@dataclass
+class MissionResult:
+    seed: int
+    world: str
+    mode: str  # inprocess | wire
+    mapped_pct: float | None
+    fidelity_pct: float | None
+    located: int | None
+    collected: int
+    samples: int
+    returned_home: bool
+    completed: bool  # the client reported mission_complete (in-process) / truth says done (wire)
+    end_reason: str
+    time_s: float  # simulated seconds
+    stuck_time_s: float
+    longest_stuck_s: float
+    frames: int
+    distance_m: float
+    final_distance_to_start_m: float
+    wall_s: float
+    frames_per_s: float
+    rejected_commands: int
+    files: dict = field(default_factory=dict)
+
+    def as_dict(self):
+        return {k: _nan_to_none(v) for k, v in asdict(self).items()}
+
+
+# ----------------------------------------------------------------------------- the PNG
+def mission_image(world, worldmap, trajectory, initial_samples, collected_xy, start_xy):
+    """BGR image, north up: truth grey, mapped navigable blue, obstacles red, trail yellow."""
+    import cv2
+
+    truth = world.nav_truth > 0
+    img = np.zeros((200, 200, 3), np.uint8)
+    img[truth] = (70, 70, 70)
+    if worldmap is not None:
+        nav = worldmap[:, :, 2] > 0
+        obs = (worldmap[:, :, 0] > 0) & ~nav
+        img[obs] = (0, 0, 150)
+        img[nav & truth] = (255, 120, 0)
+        img[nav & ~truth] = (200, 0, 200)  # false navigable: magenta
+        img[worldmap[:, :, 1] > 0] = (0, 255, 0)
+    s = MAP_PNG_SCALE
+    big = cv2.resize(img, (200 * s, 200 * s), interpolation=cv2.INTER_NEAREST)
+
+    def px(x, y):
+        return int(round(x * s)), int(round((200 - y) * s))
+
+    big = np.ascontiguousarray(big[::-1])  # north up for display
+    if len(trajectory) > 1:
+        pts = np.array([px(x, y) for x, y in trajectory], np.int32).reshape(-1, 1, 2)
+        cv2.polylines(big, [pts], False, (0, 230, 255), 1, cv2.LINE_AA)
+    collected = {(round(x, 3), round(y, 3)) for x, y in collected_xy}
+    for smp in initial_samples:
+        got = (round(smp[0], 3), round(smp[1], 3)) in collected
+        cv2.circle(big, px(*smp[:2]), 6, (0, 255, 0) if got else (0, 200, 255), 2)
+    cv2.drawMarker(big, px(*start_xy), (255, 255, 255), cv2.MARKER_CROSS, 14, 2)
+    if len(trajectory):
+        cv2.circle(big, px(*trajectory[-1]), 4, (255, 255, 255), -1)
+    return big
+
+
+# ----------------------------------------------------------------------------- in-process
+def _progress(total, enabled, desc):
+    from tqdm import tqdm
+
+    return tqdm(total=round(total), unit="sim s", disable=not enabled, desc=desc, leave=False)
+
+
+def _video_writer(path, fps):
+    import cv2
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (480, 160))
+    if not writer.isOpened():
+        raise ValueError(f"cannot open video writer for {path}")
+    return writer
+
+
+def _video_frame(rgb, worldmap):
+    import cv2
+
+    cam = np.zeros((160, 320, 3), np.uint8) if rgb is None else rgb[:, :, ::-1]
+    mp = np.zeros((200, 200, 3), np.uint8) if worldmap is None else worldmap[::-1, :, ::-1]
+    mp = cv2.resize(np.ascontiguousarray(mp), (160, 160), interpolation=cv2.INTER_NEAREST)
+    return np.ascontiguousarray(np.hstack([cam, mp]))
+
+
+def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None, progress=True,
+                  render=True, client_factory=None):
+    """Drive `AutonomyClient` against `RoverTwin` in this process; returns (result dict, worldmap, traj)."""
+    from sim.twin import CommandError, RoverTwin
+
+    if client_factory is None:
+        from autonomy import AutonomyClient
+
+        def client_factory():
+            return AutonomyClient(ground_truth=world.nav_truth, insets=False)
+    twin = RoverTwin(world, seed=seed, render=render)
+    client = client_factory()
+    tel = twin.reset(seed)
+    recorder = _recorder(record)
+    writer = _video_writer(video, 1.0 / twin.frame_dt) if video else None
+    stuck = StuckMeter()
+    traj = [(twin.truth.x, twin.truth.y)]
+    end_reason, completed, distance = "time limit", False, 0.0
+    bar = _progress(time_limit, progress, f"seed {seed}")
+    t_wall = time.perf_counter()
+    try:
+        while twin.sim_time < time_limit:
+            if recorder is not None:
+                recorder.write_twin(twin)
+            event, payload = client.handle_telemetry(tel)
+            try:
+                tel = twin.step(event, payload)
+            except CommandError as exc:  # the real simulator would stall here
+                end_reason = f"stalled: {exc}"
+                log.warning("client sent a command the simulator cannot parse: %s", exc)
+                break
+            tr = twin.truth
+            distance += math.hypot(tr.x - traj[-1][0], tr.y - traj[-1][1])
+            traj.append((tr.x, tr.y))
+            stuck.update(tr.sim_time, twin.frame_dt, tr.x, tr.y, tr.v, twin.controls.throttle,
+                         tr.picking_up)
+            if writer is not None:
+                writer.write(_video_frame(twin.last_rgb, client.rover.worldmap))
+            bar.update(twin.frame_dt)
+            if getattr(client.rover, "mission_complete", False):
+                end_reason, completed = "mission complete", True
+                break
+    finally:
+        bar.close()
+        if writer is not None:
+            writer.release()
+        if recorder is not None:
+            recorder.close()
+    wall = time.perf_counter() - t_wall
+    summary = dict(twin=twin, stuck=stuck, traj=traj, distance=distance, wall=wall,
+                   end_reason=end_reason, completed=completed,
+                   worldmap=np.array(client.rover.worldmap, copy=True),
+                   rejected=twin.rejected_commands)
+    return summary
+
+
+def _recorder(folder):
+    if not folder:
+        return None
+    from sim.record import TwinRecorder
+
+    return TwinRecorder(folder)
+
+
+# ----------------------------------------------------------------------------- scoring
+def score(world, seed, mode, summary, time_limit) -> MissionResult:
+    from evaluation.metrics import score_map
+
+    twin = summary["twin"]
+    tr = twin.truth
+    samples_xy = [(s.x, s.y) for s in tr.initial_samples]
+    worldmap = summary.get("worldmap")
+    if worldmap is not None:
+        ms = score_map(worldmap, world.nav_truth, samples_xy)
+        mapped, fidelity, located = ms.mapped_pct, ms.fidelity_pct, ms.located
+    else:
+        mapped = fidelity = located = None
+    home = math.hypot(tr.x - tr.start_xy[0], tr.y - tr.start_xy[1])
+    all_collected = len(tr.collected) == len(tr.initial_samples) and len(tr.initial_samples) > 0
+    wall = summary["wall"]
+    return MissionResult(
+        seed=seed, world=world.name, mode=mode, mapped_pct=mapped, fidelity_pct=fidelity,
+        located=located, collected=len(tr.collected), samples=len(tr.initial_samples),
+        returned_home=bool(all_collected and home <= HOME_RADIUS_M), completed=summary["completed"],
+        end_reason=summary["end_reason"], time_s=round(tr.sim_time, 3),
+        stuck_time_s=round(summary["stuck"].total_s, 2), longest_stuck_s=round(summary["stuck"].longest_s, 2),
+        frames=tr.frame, distance_m=round(summary["distance"], 2),
+        final_distance_to_start_m=round(home, 2), wall_s=round(wall, 2),
+        frames_per_s=round(tr.frame / wall, 1) if wall > 0 else float("nan"),
+        rejected_commands=summary["rejected"])
+
+
+def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,
+                wire=False, progress=True, render=True, write_files=True) -> dict:
+    """Run, score and (optionally) write mission.json + mission.png; returns the result dict."""
+    from sim.world import World, load_world
+
+    world_obj = world if isinstance(world, World) else load_world(world)
+    if wire:
+        from sim.wire import run_wire_mission
+
+        summary = run_wire_mission(world_obj, seed, time_limit=time_limit, record=record,
+                                   progress=progress, render=render)
+        mode = "wire"
+    else:
+        summary = run_inprocess(world_obj, seed, time_limit=time_limit, video=video, record=record,
+                                progress=progress, render=render)
+        mode = "inprocess"
+    result = score(world_obj, seed, mode, summary, time_limit)
+    if write_files:
+        out = Path(out) if out else Path(DEFAULT_OUT_ROOT) / f"mission-seed{seed}"
+        tr = summary["twin"].truth
+        img = mission_image(world_obj, summary.get("worldmap"), summary["traj"],
+                            [(s.x, s.y) for s in tr.initial_samples],
+                            [(s.x, s.y) for s in tr.collected], tr.start_xy)
+        write_png_atomic(out / "mission.png", img)
+        result.files = {"json": str(out / "mission.json"), "png": str(out / "mission.png")}
+        if video:
+            result.files["video"] = str(video)
+        if record:
+            result.files["record"] = str(record)
+        write_json_atomic(out / "mission.json", result.as_dict())
+    return result.as_dict()
+
+
+def format_result(r: dict) -> str:
+    def f(v, fmt="{:.1f}"):
+        return "n/a" if v is None else fmt.format(v)
+
+    return (f"seed {r['seed']} [{r['world']}, {r['mode']}]: mapped {f(r['mapped_pct'])}%, "
+            f"fidelity {f(r['fidelity_pct'])}%, located {f(r['located'], '{}')}/{r['samples']}, "
+            f"collected {r['collected']}/{r['samples']}, home {'yes' if r['returned_home'] else 'no'}, "
+            f"time {r['time_s']:.0f} s ({r['end_reason']}), stuck {r['stuck_time_s']:.0f} s "
+            f"(longest {r['longest_stuck_s']:.0f} s), {r['frames']} frames at {f(r['frames_per_s'])} fps")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description="Run one autonomous mission on the digital twin.")
+    p.add_argument("--seed", type=int, default=0, help="scene seed: start yaw and samples")
+    p.add_argument("--world", default="default", help="real | procedural:K | PATH.png (default: real if present)")
+    p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, help="simulated seconds")
+    p.add_argument("--out", default=None, help="output folder (default out/mission-seedN)")
+    p.add_argument("--video", default=None, help="write camera + map video (mp4)")
+    p.add_argument("--record", default=None, help="record a simulator-format log (robot_log.csv + IMG)")
+    p.add_argument("--wire", action="store_true", help="run drive_rover.py and talk the real wire protocol")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--log-level", default="INFO")
+    a = p.parse_args(argv)
+    logging.basicConfig(level=getattr(logging, a.log_level.upper(), logging.INFO),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    if a.time_limit <= 0 or not math.isfinite(a.time_limit):
+        p.error("--time-limit must be a positive number of seconds")
+    try:
+        r = run_mission(a.seed, a.world, a.time_limit, a.out, a.video, a.record, a.wire,
+                        progress=not a.no_progress)
+    except (ValueError, FileNotFoundError) as exc:
+        log.error("%s", exc)
+        return 2
+    log.info("%s", format_result(r))
+    log.info("wrote %s", ", ".join(r["files"].values()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
