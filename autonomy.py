@@ -15,6 +15,8 @@ import math
 import time
 from typing import Callable, Dict, Optional, Tuple
 
+import numpy as np
+
 from rover_state import RoverState
 import supporting_functions as sf
 
@@ -27,6 +29,8 @@ MAX_THROTTLE = 1.0  # |throttle| clamp (simulator does not clamp; 1 is full torq
 MAX_BRAKE = 10.0  # brake clamp (simulator does not clamp), brake units
 SAFE_STOP = {"throttle": 0.0, "brake": 1.0, "steer": 0.0}  # command for bad frames
 LOG_EVERY_S = 5.0  # the same warning is logged at most once per this many seconds
+RESET_JUMP_M = 20.0  # a position jump this large between frames means the simulator restarted, m
+SAMPLE_MATCH_M = 0.1  # a reported sample farther than this from every known one is new, m
 NUMBER_FORMAT = "{:.4f}"  # plain decimal with '.', as the simulator's float.Parse expects
 
 STAGES = ("decode", "perception", "decision", "insets", "total")  # timing hook keys
@@ -123,6 +127,8 @@ class AutonomyClient:
         self.last_timings: Dict[str, float] = {}
         self.last_telemetry: Optional[sf.Telemetry] = None
         self.bad_frames = 0  # telemetry frames answered with a safe stop
+        self.episodes = 1  # missions seen (a simulator restart starts a new one)
+        self._last_sim_time: Optional[float] = None
         self.step_errors = 0  # exceptions caught from perception/decision/insets
 
     # -- helpers --------------------------------------------------------------
@@ -134,6 +140,37 @@ class AutonomyClient:
         if tel.sim_time is not None:
             return tel.sim_time
         return self.clock()
+
+    def _restart_reason(self, tel: sf.Telemetry) -> Optional[str]:
+        """Why this frame belongs to a new mission (the user reloaded the
+        simulator while we kept running), or None.  Samples only ever
+        disappear, the rover cannot teleport and the twin's clock only runs
+        forward, so any of those going the other way means a restart."""
+        r = self.rover
+        if r.start_time is None:
+            return None
+        if tel.sim_time is not None and self._last_sim_time is not None \
+                and tel.sim_time < self._last_sim_time:
+            return f"sim_time went back to {tel.sim_time:.2f} s"
+        if tel.sample_count is not None and r.samples_remaining is not None \
+                and tel.sample_count > r.samples_remaining:
+            return f"sample_count rose from {r.samples_remaining} to {tel.sample_count}"
+        x, y = r.pos
+        if math.isfinite(x) and math.isfinite(y) and \
+                math.hypot(tel.pos[0] - x, tel.pos[1] - y) > RESET_JUMP_M:
+            return f"position jumped from ({x:.1f}, {y:.1f}) to ({tel.pos[0]:.1f}, {tel.pos[1]:.1f})"
+        known_x, known_y = r.samples_pos
+        if len(known_x) and len(tel.samples_xy):
+            dx = tel.samples_xy[:, 0:1] - np.asarray(known_x)[None, :]
+            dy = tel.samples_xy[:, 1:2] - np.asarray(known_y)[None, :]
+            if (np.hypot(dx, dy).min(axis=1) > SAMPLE_MATCH_M).any():
+                return "a sample appeared where none was"
+        return None
+
+    def _new_mission(self, reason: str):
+        log.warning("simulator restarted (%s): starting a new mission", reason)
+        self.rover = RoverState(ground_truth=self.rover.ground_truth)
+        self.episodes += 1
 
     # -- the frame ------------------------------------------------------------
     def handle_telemetry(self, data) -> Tuple[str, Dict[str, str]]:
@@ -166,7 +203,12 @@ class AutonomyClient:
             sf.update_rover(rover, tel, 0.0)
             self.warn("bad-frame", "bad telemetry frame answered with a safe stop")
             return self._safe_stop()
+        reason = self._restart_reason(tel)
+        if reason:
+            self._new_mission(reason)
+            rover = self.rover
         sf.update_rover(rover, tel, self._now(tel))
+        self._last_sim_time = tel.sim_time
 
         t = time.perf_counter()
         try:

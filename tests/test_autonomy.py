@@ -233,3 +233,41 @@ def test_failing_insets_still_send_the_command(monkeypatch):
     c = client(insets=True)
     event, payload = c.handle_telemetry(telemetry())
     assert event == "data" and payload["throttle"] == "0.2000" and "inset_image1" not in payload
+
+
+# --- simulator restart ----------------------------------------------------------------
+@pytest.mark.parametrize("restart, why", [
+    (dict(position="10.0000;10.0000"), "teleport"),
+    (dict(sample_count="6"), "sample count rose"),
+    (dict(samples_x="50.00;104.56", samples_y="50.00;80.78"), "new sample position"),
+])
+def test_simulator_restart_starts_a_new_mission(restart, why):
+    c = client()
+    c.handle_telemetry(telemetry(sample_count="6"))
+    c.handle_telemetry(telemetry(sample_count="5"))
+    old = c.rover
+    old.worldmap[0, 0, 2] = 255
+    assert c.handle_telemetry(telemetry(**restart))[0] == "data"
+    assert c.rover is not old, why
+    assert c.episodes == 2 and c.rover.worldmap[0, 0, 2] == 0
+
+
+def test_twin_clock_going_back_is_a_restart():
+    c = client()
+    c.handle_telemetry(telemetry(sim_time="30.0000"))
+    c.handle_telemetry(telemetry(sim_time="0.0000"))
+    assert c.episodes == 2 and c.rover.total_time == 0.0
+
+
+def test_normal_progress_is_not_a_restart():
+    c = client()
+    c.handle_telemetry(telemetry(sim_time="0.0000"))
+    c.handle_telemetry(telemetry(position="100.5000;85.7000", sim_time="0.1000"))
+    # a sample collected: fewer samples, lower count
+    c.handle_telemetry(telemetry(samples_x="104.56", samples_y="80.78", sample_count="5",
+                                 sim_time="0.2000"))
+    # garbage sample list then valid again
+    c.handle_telemetry(telemetry(samples_x="zz", samples_y="", sample_count="5", sim_time="0.3000"))
+    c.handle_telemetry(telemetry(samples_x="104.56", samples_y="80.78", sample_count="5",
+                                 sim_time="0.4000"))
+    assert c.episodes == 1
