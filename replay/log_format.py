@@ -231,11 +231,11 @@ def _read_text(p: Path) -> str:
     return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
-def _sniff_separator(header: str) -> str:
+def _sniff_separator(header: str, p: Path) -> str:
     counts = {sep: header.count(sep) for sep in (";", ",", "\t")}
     sep = max(counts, key=counts.get)
     if counts[sep] == 0:
-        raise LogFormatError("header has no ';' or ',' separators: not a simulator log")
+        raise LogFormatError(f"{p}: first line has no ';' or ',' separators: not a simulator log")
     return sep
 
 
@@ -285,7 +285,7 @@ def read_log(path, require_images: bool = True) -> LogData:
     lines = [ln for ln in text.split("\n") if ln.strip()]
     if not lines:
         raise LogFormatError(f"{p}: empty file, not a simulator log")
-    sep = _sniff_separator(lines[0])
+    sep = _sniff_separator(lines[0], p)
     header = next(csv.reader(io.StringIO(lines[0]), delimiter=sep))
     cols = _check_header(header, p)
     data = LogData(log_path=p, separator=sep)
