@@ -323,14 +323,14 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
 
 
 def format_result(r: dict) -> str:
-    def f(v, fmt="{:.1f}"):
+    def f(v, fmt="{:.1f}%"):
         return "n/a" if v is None else fmt.format(v)
 
-    return (f"seed {r['seed']} [{r['world']}, {r['mode']}]: mapped {f(r['mapped_pct'])}%, "
-            f"fidelity {f(r['fidelity_pct'])}%, located {f(r['located'], '{}')}/{r['samples']}, "
+    return (f"seed {r['seed']} [{r['world']}, {r['mode']}]: mapped {f(r['mapped_pct'])}, "
+            f"fidelity {f(r['fidelity_pct'])}, located {f(r['located'], '{}')}/{r['samples']}, "
             f"collected {r['collected']}/{r['samples']}, home {'yes' if r['returned_home'] else 'no'}, "
             f"time {r['time_s']:.0f} s ({r['end_reason']}), stuck {r['stuck_time_s']:.0f} s "
-            f"(longest {r['longest_stuck_s']:.0f} s), {r['frames']} frames at {f(r['frames_per_s'])} fps")
+            f"(longest {r['longest_stuck_s']:.0f} s), {r['frames']} frames at {f(r['frames_per_s'], '{:.1f}')} fps")
 
 
 def main(argv=None) -> int:

@@ -150,6 +150,7 @@ class RoverTwin:
             self.seed = int(seed)
         rng = np.random.default_rng(self.seed)
         yaw = float(rng.uniform(0.0, 360.0)) if start_yaw is None else float(start_yaw) % 360.0
+        self.initial_yaw = yaw
         self.samples = spawn_samples(self.world.sample_spots, rng)
         self.initial_samples = list(self.samples)
         self.physics = RoverPhysics(self.world, *self.world.start_xy, yaw)
@@ -167,6 +168,12 @@ class RoverTwin:
         Raises CommandError (state unchanged) for a command the real simulator would
         not answer.
         """
+        self.apply(event, payload)
+        self.advance_frame()
+        return self.telemetry()
+
+    def apply(self, event: str, payload=None) -> None:
+        """Apply one client event without advancing time (real-time wire mode)."""
         try:
             event, cmd = parse_command(event, payload)
         except CommandError:
@@ -185,8 +192,6 @@ class RoverTwin:
                 self.physics.start_fixed_turn(cmd["angle"], cmd["time"])
             else:
                 log.debug("fixed_turn ignored: rover moving or inputs nonzero")
-        self.advance_frame()
-        return self.telemetry()
 
     def advance_frame(self):
         """One frame of game time: physics steps, pickup arm, clock."""

@@ -1,0 +1,359 @@
+"""Headless simulator process that talks to a client exactly like the Unity program.
+
+    python -m sim.wire [--host 127.0.0.1] [--port 4567] [--seed N] [--world SPEC]
+                       [--mode lockstep|realtime] [--fps 25] [--time-limit S] [--record DIR]
+
+Like the real simulator it is the websocket *client*: it opens
+``ws://HOST:PORT/socket.io/?EIO=4&transport=websocket`` directly (no polling, no
+upgrade), never sends ``40``, pings ``2`` every 25 s, answers ``3`` to ``2``,
+reconnects while disconnected, emits ``42["telemetry",{...}]`` (string values)
+when the socket opens and then exactly one telemetry per handled command
+(``data``, ``manual``, ``pickup``, ``fixed_turn``).
+
+Modes:
+* ``lockstep`` (default): every command advances the twin one frame (0.04 s) and
+  the reply carries the new state - runs as fast as the client answers.
+* ``realtime``: the twin advances at ``--fps`` frames per wall-clock second
+  whatever the client does; a command is applied at once and answered with the
+  current state, as in Unity.
+
+A command the real simulator cannot parse (JSON numbers, garbage, NaN, missing
+fields, unknown events) gets *no reply*, as in the real one (its float.Parse
+throws and the chain stalls); the twin logs it and keeps running.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+URL_TEMPLATE = "ws://{host}:{port}/socket.io/?EIO=4&transport=websocket"  # the simulator's URL
+PING_INTERVAL_S = 25.0  # s between the client's "2" pings (Engine.IO v3 rule)
+RECONNECT_DELAY_S = 0.005  # s between reconnect attempts (the simulator's 5 ms)
+RECV_POLL_S = 0.05  # s, receive timeout so pings and real-time frames keep flowing
+OPEN_TELEMETRY_COUNT = 1  # telemetry messages sent unprompted when the socket opens
+DEFAULT_FPS = 25.0  # frames per second in real-time mode
+STALL_TIMEOUT_S = 30.0  # wall s without a command before a wire mission gives up
+SERVER_START_TIMEOUT_S = 60.0  # wall s to wait for drive_rover.py to accept connections
+HOME_STILL_S = 2.0  # s stopped within the home radius after collecting all = done (wire missions)
+PROJECT_DIR = Path(__file__).resolve().parent.parent
+
+
+def encode_event(event: str, payload) -> str:
+    """Socket.IO EVENT packet as a text frame: 42["name",{...}]."""
+    return "42" + json.dumps([event, payload], separators=(",", ":"))
+
+
+def decode_event(frame: str):
+    """(event, payload) of a 42 frame; raises ValueError for anything else."""
+    body = frame[2:]
+    if body.startswith("/"):  # namespaced packet "42/ns,[...]": the sim only knows "/"
+        body = body.split(",", 1)[1] if "," in body else ""
+    while body and body[0].isdigit():  # ack id
+        body = body[1:]
+    msg = json.loads(body)
+    if not isinstance(msg, list) or not msg or not isinstance(msg[0], str):
+        raise ValueError(f"not an event packet: {frame[:80]!r}")
+    return msg[0], (msg[1] if len(msg) > 1 else None)
+
+
+class WireSimulator:
+    """One simulated rover on the wire. `run()` blocks until `stop()` or `should_stop()`."""
+
+    def __init__(self, twin, host="127.0.0.1", port=4567, mode="lockstep", fps=DEFAULT_FPS,
+                 recorder=None, on_frame=None, should_stop=None, open_telemetry=OPEN_TELEMETRY_COUNT):
+        if mode not in ("lockstep", "realtime"):
+            raise ValueError(f"mode must be lockstep or realtime, not {mode!r}")
+        self.twin = twin
+        self.url = URL_TEMPLATE.format(host=host, port=int(port))
+        self.mode = mode
+        self.fps = float(fps) if fps and fps > 0 else DEFAULT_FPS
+        self.recorder = recorder
+        self.on_frame = on_frame  # callback(twin) after every advanced frame
+        self.should_stop = should_stop or (lambda: False)
+        self.open_telemetry = max(0, int(open_telemetry))
+        self._stop = threading.Event()
+        self.ws = None
+        self.connections = 0
+        self.commands = 0
+        self.rejected = 0
+        self.replies = 0
+        self.last_command_wall = time.monotonic()
+
+    def stop(self):
+        self._stop.set()
+
+    def _stopping(self):
+        return self._stop.is_set() or self.should_stop()
+
+    # ---------------------------------------------------------------- connection
+    def _connect(self):
+        import websocket
+
+        warned = False
+        while not self._stopping():
+            try:
+                ws = websocket.create_connection(self.url, timeout=5)
+                ws.settimeout(RECV_POLL_S)
+                self.connections += 1
+                log.info("connected to %s", self.url)
+                return ws
+            except Exception as exc:  # refused, reset, timeout: the sim keeps trying
+                if not warned:
+                    log.info("waiting for a server at %s (%s)", self.url, exc)
+                    warned = True
+                time.sleep(RECONNECT_DELAY_S)
+        return None
+
+    def _send(self, text):
+        self.ws.send(text)
+
+    def _send_telemetry(self, tel):
+        self._send(encode_event("telemetry", tel))
+        self.replies += 1
+
+    # ---------------------------------------------------------------- frames
+    def _frame_done(self):
+        if self.recorder is not None:
+            self.recorder.write_twin(self.twin)
+        if self.on_frame is not None:
+            self.on_frame(self.twin)
+
+    def _handle_event(self, event, payload):
+        from sim.twin import CommandError
+
+        self.commands += 1
+        self.last_command_wall = time.monotonic()
+        try:
+            if self.mode == "lockstep":
+                tel = self.twin.step(event, payload)
+                self._frame_done()
+            else:
+                self.twin.apply(event, payload)
+                tel = self.twin.telemetry()
+        except CommandError as exc:
+            self.rejected += 1
+            log.warning("no telemetry reply (the real simulator would stall): %s", exc)
+            return
+        self._send_telemetry(tel)
+
+    def _handle_frame(self, frame):
+        if not isinstance(frame, str) or not frame:
+            return
+        kind = frame[0]
+        if frame == "2" or frame.startswith("2probe"):
+            self._send("3" + frame[1:])
+        elif kind == "0":
+            log.debug("handshake %s", frame[:120])
+        elif frame.startswith("42"):
+            try:
+                event, payload = decode_event(frame)
+            except (ValueError, json.JSONDecodeError) as exc:
+                self.rejected += 1
+                log.warning("undecodable event frame ignored: %s", exc)
+                return
+            self._handle_event(event, payload)
+        elif frame.startswith("41") or kind == "1":
+            raise ConnectionResetError("server closed the session")
+        # "3" (pong), "40" (namespace connect, ignored by the sim), others: nothing to do
+
+    # ---------------------------------------------------------------- main loop
+    def run(self):
+        import websocket
+
+        while not self._stopping():
+            self.ws = self._connect()
+            if self.ws is None:
+                break
+            next_ping = time.monotonic() + PING_INTERVAL_S
+            next_frame = time.monotonic() + 1.0 / self.fps
+            try:
+                for _ in range(self.open_telemetry):
+                    self._send_telemetry(self.twin.telemetry())
+                while not self._stopping():
+                    now = time.monotonic()
+                    if now >= next_ping:
+                        self._send("2")
+                        next_ping = now + PING_INTERVAL_S
+                    if self.mode == "realtime":
+                        while now >= next_frame:
+                            self.twin.advance_frame()
+                            self._frame_done()
+                            next_frame += 1.0 / self.fps
+                    try:
+                        frame = self.ws.recv()
+                    except websocket.WebSocketTimeoutException:
+                        continue
+                    self._handle_frame(frame)
+            except (websocket.WebSocketException, OSError, ConnectionError) as exc:
+                log.info("disconnected (%s); reconnecting", exc)
+            finally:
+                try:
+                    self.ws.close()
+                except Exception:
+                    pass
+        log.info("wire simulator stopped: %d commands, %d rejected, %d replies",
+                 self.commands, self.rejected, self.replies)
+
+
+# ------------------------------------------------------------------------ wire missions
+def free_port(host="127.0.0.1") -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+def start_client_server(port, log_path=None, extra_args=()):
+    """Start drive_rover.py on `port` as a subprocess; returns the Popen."""
+    cmd = [sys.executable, str(PROJECT_DIR / "drive_rover.py"), "--port", str(port),
+           "--log-level", "WARNING", *extra_args]
+    out = open(log_path, "ab") if log_path else subprocess.DEVNULL
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen(cmd, cwd=str(PROJECT_DIR), stdout=out, stderr=subprocess.STDOUT, env=env)
+    if log_path:
+        out.close()
+    return proc
+
+
+def wait_for_port(port, proc=None, timeout=SERVER_START_TIMEOUT_S, host="127.0.0.1") -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if proc is not None and proc.poll() is not None:
+            return False
+        try:
+            with socket.create_connection((host, port), timeout=0.5):
+                return True
+        except OSError:
+            time.sleep(0.1)
+    return False
+
+
+def stop_process(proc, timeout=10.0):
+    if proc is None or proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=timeout)
+
+
+def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, render=True,
+                     server_log=None):
+    """Twin over the real protocol against drive_rover.py in a subprocess (lockstep).
+
+    The client's worldmap lives in the other process, so mapped/fidelity/located are
+    not available here (None); everything truth-based is.
+    """
+    from sim.mission import StuckMeter, _progress, _recorder
+    from sim.samples import PICKUP_DURATION_S  # noqa: F401  (documents the dependency)
+    from sim.twin import RoverTwin
+
+    from sim.mission import HOME_RADIUS_M
+
+    twin = RoverTwin(world, seed=seed, render=render)
+    port = free_port()
+    proc = start_client_server(port, server_log)
+    state = {"end": "time limit", "completed": False, "still_home_s": 0.0, "distance": 0.0}
+    stuck = StuckMeter()
+    traj = [(twin.truth.x, twin.truth.y)]
+    bar = _progress(time_limit, progress, f"seed {seed} (wire)")
+    recorder = _recorder(record)
+
+    def on_frame(tw):
+        tr = tw.truth
+        state["distance"] += math.hypot(tr.x - traj[-1][0], tr.y - traj[-1][1])
+        traj.append((tr.x, tr.y))
+        stuck.update(tr.sim_time, tw.frame_dt, tr.x, tr.y, tr.v, tw.controls.throttle, tr.picking_up)
+        bar.update(tw.frame_dt)
+        done = (tr.initial_samples and len(tr.collected) == len(tr.initial_samples)
+                and math.hypot(tr.x - tr.start_xy[0], tr.y - tr.start_xy[1]) <= HOME_RADIUS_M
+                and abs(tr.v) < 0.01)
+        state["still_home_s"] = state["still_home_s"] + tw.frame_dt if done else 0.0
+
+    def should_stop():
+        if twin.sim_time >= time_limit:
+            return True
+        if state["still_home_s"] >= HOME_STILL_S:
+            state["end"], state["completed"] = "all collected and home", True
+            return True
+        if proc.poll() is not None:
+            state["end"] = f"client exited with {proc.returncode}"
+            return True
+        if time.monotonic() - sim.last_command_wall > STALL_TIMEOUT_S:
+            state["end"] = "stalled: no command from the client"
+            return True
+        return False
+
+    sim = WireSimulator(twin, port=port, mode="lockstep", recorder=recorder, on_frame=on_frame,
+                        should_stop=should_stop)
+    t0 = time.perf_counter()
+    try:
+        if not wait_for_port(port, proc):
+            raise RuntimeError(f"drive_rover.py did not start on port {port} (exit {proc.poll()})")
+        sim.last_command_wall = time.monotonic()
+        sim.run()
+    finally:
+        bar.close()
+        stop_process(proc)
+        if recorder is not None:
+            recorder.close()
+    return dict(twin=twin, stuck=stuck, traj=traj, distance=state["distance"],
+                wall=time.perf_counter() - t0, end_reason=state["end"], completed=state["completed"],
+                worldmap=None, rejected=sim.rejected)
+
+
+# ------------------------------------------------------------------------ CLI
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description="Headless RoboND rover simulator on the real wire protocol.")
+    p.add_argument("--host", default="127.0.0.1")
+    p.add_argument("--port", type=int, default=4567)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--world", default="default", help="real | procedural:K | PATH.png")
+    p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    p.add_argument("--fps", type=float, default=DEFAULT_FPS, help="frames/s in realtime mode")
+    p.add_argument("--time-limit", type=float, default=0.0, help="stop after this many simulated s (0 = never)")
+    p.add_argument("--record", default=None, help="record a simulator-format log into this folder")
+    p.add_argument("--open-telemetry", type=int, default=OPEN_TELEMETRY_COUNT,
+                   help="telemetry messages sent when the socket opens (the real sim: ~2)")
+    p.add_argument("--log-level", default="INFO")
+    a = p.parse_args(argv)
+    logging.basicConfig(level=getattr(logging, a.log_level.upper(), logging.INFO),
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    from sim.mission import _recorder
+    from sim.twin import RoverTwin
+    from sim.world import load_world
+
+    try:
+        world = load_world(a.world)
+    except (ValueError, FileNotFoundError) as exc:
+        log.error("%s", exc)
+        return 2
+    twin = RoverTwin(world, seed=a.seed)
+    recorder = _recorder(a.record)
+    limit = a.time_limit if a.time_limit and a.time_limit > 0 else math.inf
+    sim = WireSimulator(twin, a.host, a.port, a.mode, a.fps, recorder=recorder,
+                        should_stop=lambda: twin.sim_time >= limit, open_telemetry=a.open_telemetry)
+    try:
+        sim.run()
+    except KeyboardInterrupt:
+        log.info("interrupted")
+    finally:
+        if recorder is not None:
+            recorder.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
