@@ -1,0 +1,172 @@
+"""Perception: thresholds, rock detection, RoverState fields, vote map behaviour."""
+import os
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+import perception as P
+import shared_data
+from rover_state import RoverState
+
+
+def _rgb(path):
+    if not path.is_file():
+        pytest.skip(f"{path} not found (set {shared_data.SHARED_ENV_VAR})")
+    return cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+
+
+CAL = shared_data.udacity_dir() / "calibration_images"
+
+
+def _rover(img, pos=(100.0, 90.0), yaw=0.0, pitch=0.0, roll=0.0):
+    r = RoverState()
+    r.img, r.pos, r.yaw, r.pitch, r.roll = img, pos, yaw, pitch, roll
+    return r
+
+
+def _synthetic(sand_from_row=90):
+    """Light floor below a row, dark wall above: a simple corridor-free view."""
+    img = np.full((160, 320, 3), 40, np.uint8)
+    img[sand_from_row:] = (210, 190, 175)
+    return img
+
+
+def test_masks_shape_dtype_and_classes():
+    img = _synthetic()
+    img[120:126, 150:156] = (220, 190, 10)  # a gold rock on the sand
+    nav, obs, rock = P.navigable_mask(img), P.obstacle_mask(img), P.rock_mask(img)
+    for m in (nav, obs, rock):
+        assert m.shape == (160, 320) and m.dtype == bool
+    assert nav[150].sum() == 320 and not nav[50].any()
+    assert rock[120:126, 150:156].all() and rock.sum() == 36
+    assert not obs[:80].any()  # the sky half is not an obstacle
+    assert obs[85].all() and not obs[150].any()
+    assert not (nav & rock).any() and not (obs & rock).any()
+
+
+def test_navigable_mask_on_calibration_grid():
+    nav = P.navigable_mask(_rgb(CAL / "example_grid1.jpg"))
+    assert nav[140:].mean() > 0.8  # the floor in front is sand
+    assert nav[:60].mean() < 0.1  # sky and far walls are not
+
+
+@pytest.mark.parametrize("name", ["example_rock1.jpg", "example_rock2.jpg"])
+def test_rock_detected_in_calibration_images(name):
+    img = _rgb(CAL / name)
+    assert P.rock_mask(img).sum() > 100
+    r = P.perception_step(_rover(img))
+    assert r.rock_angles.size > 0
+    assert 0.5 < r.rock_dists.min() < 6.0
+    assert abs(float(np.mean(r.rock_angles))) < np.radians(60)
+
+
+def test_no_rock_in_grid_image():
+    img = _rgb(CAL / "example_grid1.jpg")
+    assert P.rock_mask(img).sum() < P.ROCK_MIN_PIXELS
+    r = P.perception_step(_rover(img))
+    assert r.rock_angles.size == 0 and r.rocks_world == []
+
+
+def test_rock_world_position_uses_the_blob_base():
+    # a 12 px tall gold blob whose base sits on the floor 2 m ahead: the remembered position
+    # must be ~2 m ahead, not farther (its centroid would project farther)
+    _, v_base, _ = P.rover_to_pixel(2.0, 0.0)
+    base = int(v_base)
+    img = _synthetic()
+    img[base - 11:base + 1, 155:165] = (230, 195, 15)
+    r = _rover(img, pos=(100.0, 100.0), yaw=0.0)
+    for _ in range(P.ROCK_MIN_HITS):
+        P.perception_step(r)
+    assert len(r.rocks_world) == 1
+    x, y = r.rocks_world[0]
+    assert x == pytest.approx(102.0, abs=0.15) and y == pytest.approx(100.0, abs=0.15)
+    assert r.worldmap[int(y), int(x), 1] == 255
+
+
+def test_perception_step_fills_rover_fields():
+    r = P.perception_step(_rover(_synthetic(), pos=(100.0, 90.0), yaw=45.0))
+    assert r.map_updated
+    assert r.nav_angles.size > 100 and r.nav_angles.size == r.nav_dists.size
+    assert r.obs_angles.size > 100 and r.obs_angles.size == r.obs_dists.size
+    assert np.all(r.nav_dists > 0) and np.all(np.abs(r.nav_angles) < np.pi / 2)
+    assert r.vision_image.shape == (160, 320, 3) and r.vision_image.dtype == np.uint8
+    assert r.worldmap.shape == (200, 200, 3) and r.worldmap.dtype == np.uint8
+    assert r.worldmap[:, :, 2].any() and r.worldmap[:, :, 0].any()
+    # navigable marks lie ahead of the rover (north-east for yaw 45)
+    ys, xs = np.nonzero(r.worldmap[:, :, 2])
+    assert xs.mean() > 100 and ys.mean() > 90
+    for a in (r.nav_angles, r.nav_dists, r.obs_angles, r.obs_dists):
+        assert np.isfinite(a).all()
+
+
+def test_nav_pixels_are_area_uniform():
+    """Nav pixels come from a 0.1 m top-down grid, so counts measure floor area (starter semantics)."""
+    r = P.perception_step(_rover(np.full((160, 320, 3), 200, np.uint8)))
+    area = r.nav_angles.size * P.GRID_RES_M ** 2
+    visible = P.topdown_fov_mask().sum() * P.GRID_RES_M ** 2
+    assert area == pytest.approx(visible, rel=0.05)
+
+
+def test_tilt_gate_skips_map_update_but_keeps_decision_outputs():
+    r = P.perception_step(_rover(_synthetic(), pitch=P.TILT_GATE_DEG + 2.0))
+    assert not r.map_updated
+    assert not r.worldmap.any()
+    assert r.nav_angles.size > 0
+    r = P.perception_step(_rover(_synthetic(), roll=-(P.TILT_GATE_DEG + 0.5)))
+    assert not r.map_updated
+
+
+def test_bad_inputs_do_not_crash():
+    r = RoverState()
+    assert P.perception_step(r) is r  # no image yet
+    assert not r.map_updated
+    r = P.perception_step(_rover(_synthetic(), pos=(np.nan, np.nan)))
+    assert not r.map_updated and r.nav_angles.size > 0
+    r = P.perception_step(_rover(np.zeros((10, 10, 3), np.uint8)))
+    assert not r.map_updated
+    r = P.perception_step(_rover(_synthetic(), pos=(250.0, -30.0)))  # off the map: votes clipped
+    assert not r.worldmap[:, :, 2].any()
+
+
+def test_later_views_overturn_early_wrong_marks():
+    r = _rover(_synthetic(sand_from_row=81), pos=(100.0, 100.0), yaw=0.0)
+    P.perception_step(r)
+    assert r.worldmap[100, 104, 2] == 255  # looked navigable once
+    r.img = np.full((160, 320, 3), 40, np.uint8)  # then a wall, seen many times
+    for _ in range(5):
+        P.perception_step(r)
+    assert r.worldmap[100, 104, 2] == 0
+    assert r.worldmap[100, 104, 0] == 255
+
+
+def test_occupancy_grids_expose_confidence():
+    r = _rover(_synthetic(), pos=(100.0, 100.0), yaw=0.0)
+    for _ in range(3):
+        P.perception_step(r)
+    nav, obs = P.occupancy_grids(r)
+    assert nav.shape == obs.shape == (200, 200)
+    assert nav.dtype == np.float32 and 0.0 <= nav.min() and nav.max() <= 1.0
+    blue = r.worldmap[:, :, 2] > 0
+    assert (nav[blue] > obs[blue]).all()
+    assert nav[0, 0] == 0.0 and obs[0, 0] == 0.0  # never seen
+
+
+def test_replaced_worldmap_is_rebuilt():
+    r = _rover(_synthetic(), pos=(100.0, 100.0), yaw=0.0)
+    P.perception_step(r)
+    r.worldmap = np.zeros((200, 200, 3), np.uint8)  # someone reset the display array
+    P.perception_step(r)
+    assert r.worldmap[:, :, 2].sum() > 0
+
+
+def test_client_works_without_shared_data(tmp_path):
+    env = dict(os.environ, ROVER_SHARED=str(tmp_path / "absent"))
+    code = ("import perception as P; assert abs(P.FOCAL_PX - 114.251841) < 1e-6; "
+            "assert abs(P.CAMERA_HEIGHT_M - 0.2146) < 1e-6; print('ok')")
+    out = subprocess.run([sys.executable, "-c", code], cwd=os.path.dirname(P.__file__), env=env,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "ok"
