@@ -148,7 +148,7 @@ def build_server(client, recorder: Optional[Recorder] = None):
     import flask
     import socketio
 
-    from autonomy import RateLimitedLog
+    from autonomy import SAFE_STOP, RateLimitedLog, command_payload
 
     warn = RateLimitedLog(log)
     lib_logger = logging.getLogger("drive_rover.socketio")
@@ -190,8 +190,8 @@ def build_server(client, recorder: Optional[Recorder] = None):
             event, payload = client.handle_telemetry(data)
         except Exception:  # handle_telemetry never raises; keep the lockstep anyway
             log.exception("autonomy client raised")
-            event, payload = "data", {"throttle": "0.0000", "brake": "1.0000",
-                                      "steering_angle": "0.0000"}
+            stop = SAFE_STOP
+            event, payload = "data", command_payload(stop["throttle"], stop["brake"], stop["steer"])
         if recorder is not None and event != "manual":
             recorder.submit(client.last_telemetry)
         sio.emit(event, payload, room=sid)
