@@ -48,3 +48,21 @@ def test_stuck_meter_counts_throttle_without_motion():
         t += 0.04
         m.update(t, 0.04, 12.0, 10.0, 0.0, 1.0, True)
     assert m.total_s == pytest.approx(4.0, abs=0.05)
+
+
+def test_parse_seeds_and_summary():
+    from sim.evaluate import markdown_table, parse_seeds, summarise
+
+    assert parse_seeds("0-3") == [0, 1, 2, 3]
+    assert parse_seeds("5, 1,1,8-9") == [1, 5, 8, 9]
+    with pytest.raises(ValueError):
+        parse_seeds("9-2")
+    with pytest.raises(ValueError):
+        parse_seeds("x")
+    rows = [{"seed": 0, "mapped_pct": 40.0, "returned_home": True, "fidelity_pct": None},
+            {"seed": 1, "mapped_pct": 60.0, "returned_home": False, "fidelity_pct": 70.0}]
+    s = summarise(rows)
+    assert s["mapped_pct"] == {"median": 50.0, "min": 40.0}
+    assert s["returned_home"]["min"] == 0.0 and s["fidelity_pct"]["median"] == 70.0
+    md = markdown_table(rows, s)
+    assert "| median |" in md and "n/a" in md
