@@ -32,7 +32,7 @@ from navigation import astar, explore, grid, pursuit, reactive, stuck
 log = logging.getLogger(__name__)
 
 # --- speeds and the longitudinal controller ---------------------------------------
-CRUISE_SPEED_MPS = 3.0  # target speed on a clear, straight path, m/s
+CRUISE_SPEED_MPS = 4.5  # target speed on a clear, straight path, m/s
 MIN_DRIVE_SPEED_MPS = 0.6  # target speed floor while driving somewhere, m/s
 THROTTLE_GAIN = 1.2  # throttle per m/s of speed deficit
 MAX_THROTTLE = 1.0  # forward throttle cap
@@ -61,6 +61,7 @@ OFF_PATH_M = 2.5  # replan when the rover is further than this from its path, m
 GOAL_PROGRESS_S = 12.0  # a goal whose path length did not shrink for this long is given up, s
 GOAL_PROGRESS_M = 1.0  # ...by at least this much, m
 FRONTIER_REACHED_M = 1.5  # a frontier target this close is reached (and ignored if still frontier), m
+BLOCKED_MEMORY_S = 120.0  # cells the rover got stuck on stay blocked this long, s
 PATH_END_SLOW_M = 3.0  # slow down over the last metres of a path to a sample or home, m
 
 # --- samples -----------------------------------------------------------------------------
@@ -80,6 +81,7 @@ SAMPLE_VISION_MEMORY_S = 1.0  # keep steering by vision this long after the rock
 PICKUP_STOP_SPEED_MPS = 0.04  # request pickup only below this speed (autonomy's gate is 0.05), m/s
 PICKUP_RETRY_S = 2.0  # re-request a pickup if picking_up did not start within this, s
 PICKUP_REACH_M = 0.84  # pickup point ahead of the rover origin, m
+COLLECT_DEBOUNCE_S = 3.0  # pickup-finished and count-dropped within this time are one collection, s
 
 # --- mission -----------------------------------------------------------------------------
 HOME_STOP_M = 1.5  # parked when this close to the start, m
@@ -128,7 +130,7 @@ class NavMemory:
         self.recovery = None
         self.stuck_events = []  # (t, x, y)
         self.stuck_since = None  # start of the current unbroken stuck spell
-        self.blocked = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
+        self.blocked_at = np.full((grid.GRID_SIZE, grid.GRID_SIZE), -np.inf, np.float32)  # when a cell was blocked
         # turning in place
         self.rotate_heading = None  # world yaw to turn to, degrees
         self.rotate_since = 0.0
@@ -155,6 +157,7 @@ class NavMemory:
         self.rock_skip = []  # (x, y, until_t)
         self.pickup_sent_at = -math.inf
         self.was_picking = False
+        self.last_collect_t = -math.inf  # when the last collection was registered, s
         self.last_remaining = None
         self.done = False
 
@@ -246,7 +249,8 @@ def _update_memory(rover, nav, s):
     finished = nav.was_picking and not s.picking_up
     dropped = (nav.last_remaining is not None and s.samples_remaining is not None
                and s.samples_remaining < nav.last_remaining)
-    if finished or dropped:
+    if (finished or dropped) and s.t - nav.last_collect_t > COLLECT_DEBOUNCE_S:
+        nav.last_collect_t = s.t
         _register_collection(nav, s)
     nav.was_picking = s.picking_up
     if s.samples_remaining is not None:
@@ -343,7 +347,7 @@ def _check_stuck(nav, s):
     nav.recovery = stuck.Recovery(s.t, sign, repeat)
     for r, c in stuck.blocked_cells_ahead(s.pos, s.yaw):
         if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
-            nav.blocked[r, c] = True
+            nav.blocked_at[r, c] = s.t
     nav.progress.reset()
     nav.rotate_heading = None
     nav.plan_time = -math.inf  # replan around the blocked cells
@@ -444,7 +448,7 @@ def mode_sample(rover, nav, s):
         speed = float(np.clip(SAMPLE_SPEED_GAIN * (dist - SAMPLE_STOP_M) + SAMPLE_MIN_SPEED_MPS,
                               SAMPLE_MIN_SPEED_MPS, SAMPLE_MAX_SPEED_MPS))
         if abs(math.degrees(alpha)) > SAMPLE_ROTATE_DEG and abs(s.vel) < 1.0:
-            _start_rotation(nav, s, s.yaw + math.degrees(alpha))
+            _start_rotation(nav, s, s.yaw + math.degrees(alpha), "sample-vision")
             return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
         steer = float(np.clip(SAMPLE_STEER_GAIN * math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
         thr, brk = _speed_control(s.vel, speed)
@@ -458,7 +462,7 @@ def mode_sample(rover, nav, s):
             return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=True)
     alpha = pursuit.bearing(s.pos, s.yaw, nav.rock_target)
     if abs(math.degrees(alpha)) > SAMPLE_ROTATE_DEG:
-        _start_rotation(nav, s, s.yaw + math.degrees(alpha))
+        _start_rotation(nav, s, s.yaw + math.degrees(alpha), "sample-near")
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
     steer = float(np.clip(SAMPLE_STEER_GAIN * math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
     speed = float(np.clip(SAMPLE_SPEED_GAIN * dist, SAMPLE_MIN_SPEED_MPS, SAMPLE_MAX_SPEED_MPS))
@@ -482,7 +486,7 @@ def mode_home(rover, nav, s):
     # last metres: drive straight at the start point
     alpha = pursuit.bearing(s.pos, s.yaw, home)
     if abs(math.degrees(alpha)) > ROTATE_ENTER_DEG:
-        _start_rotation(nav, s, s.yaw + math.degrees(alpha))
+        _start_rotation(nav, s, s.yaw + math.degrees(alpha), "home-final")
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
     speed = float(np.clip(0.6 * dist, SAMPLE_MIN_SPEED_MPS, 1.5))
     thr, brk = _speed_control(s.vel, speed)
@@ -503,15 +507,16 @@ def _speed_control(vel, target):
     return 0.0, 0.0
 
 
-def _start_rotation(nav, s, heading_deg):
+def _start_rotation(nav, s, heading_deg, reason):
     nav.rotate_heading = float(heading_deg) % 360.0
     nav.rotate_since = s.t
+    log.debug("turn in place to %.0f deg (%s) at t=%.1f", nav.rotate_heading, reason, s.t)
 
 
 def _drive_heading(nav, s, alpha, max_speed):
     """Drive toward rover-frame bearing `alpha` (rad), avoiding what the camera sees as blocked."""
     if abs(math.degrees(alpha)) > ROTATE_ENTER_DEG:
-        _start_rotation(nav, s, s.yaw + math.degrees(alpha))
+        _start_rotation(nav, s, s.yaw + math.degrees(alpha), "path-behind")
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
     reach = reactive.reach_profile(s.nav_angles, s.nav_dists, s.obs_angles, s.obs_dists)
     heading, clear = reactive.choose_heading(reach, alpha)
@@ -520,7 +525,7 @@ def _drive_heading(nav, s, alpha, max_speed):
         side = np.sign(alpha) if abs(alpha) > math.radians(15) else (
             np.sign(np.mean(s.nav_angles)) if s.nav_angles.size else 1.0)
         side = side if side != 0 else 1.0
-        _start_rotation(nav, s, s.yaw + side * BLOCKED_TURN_DEG)
+        _start_rotation(nav, s, s.yaw + side * BLOCKED_TURN_DEG, "blocked")
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
     look = pursuit.lookahead_for_speed(s.vel)
     steer = pursuit.steer_for_curvature(2.0 * math.sin(heading) / look, s.vel)
@@ -545,7 +550,7 @@ def _follow_path(nav, s, max_speed, slow_at_end):
 def _wall_follow(nav, s):
     """Fallback without a plan: steer to the left part of the navigable view."""
     if s.nav_angles.size < FALLBACK_MIN_NAV_PIXELS:
-        _start_rotation(nav, s, s.yaw - BLOCKED_TURN_DEG)
+        _start_rotation(nav, s, s.yaw - BLOCKED_TURN_DEG, "fallback-empty")
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
     wanted = float(np.mean(s.nav_angles) + WALL_BIAS_STD * np.std(s.nav_angles))
     wanted = float(np.clip(wanted, -math.radians(ROTATE_ENTER_DEG - 5), math.radians(ROTATE_ENTER_DEG - 5)))
@@ -599,19 +604,32 @@ def _set_path(nav, s, kind, goal, cells):
     nav.plan_time = s.t
 
 
+def _blocked(nav, s):
+    """Cells remembered as blocked (stuck spots), forgotten after BLOCKED_MEMORY_S."""
+    return (s.t - nav.blocked_at) < BLOCKED_MEMORY_S
+
+
 def _plan_explore(rover, nav, s):
     """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
     free, obstacle, unknown = _grids(rover)
-    cost = grid.cost_grid(free, obstacle, nav.blocked, allow_unknown=False)
-    cell = grid.world_to_cell(s.pos)
-    # the rover's own cell may be unmapped yet (first frames) or next to a wall
-    for r in range(max(cell[0] - 1, 0), min(cell[0] + 2, grid.GRID_SIZE)):
-        for c in range(max(cell[1] - 1, 0), min(cell[1] + 2, grid.GRID_SIZE)):
-            if not nav.blocked[r, c] and not np.isfinite(cost[r, c]):
-                cost[r, c] = grid.UNKNOWN_COST
-    dist, parent = astar.distance_field(cost, cell)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored)
-    targets = explore.frontier_targets(mask, dist)
+    targets, cost, parent = [], None, None
+    blocked = _blocked(nav, s)
+    for use_blocked in (True, False):  # stale stuck memory must never hide the rest of the map
+        if not use_blocked and not blocked.any():
+            break
+        cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=False)
+        cell = grid.world_to_cell(s.pos)
+        # the rover's own cell may be unmapped yet (first frames) or next to a wall
+        r1, r2 = max(cell[0] - 1, 0), min(cell[0] + 2, grid.GRID_SIZE)
+        c1, c2 = max(cell[1] - 1, 0), min(cell[1] + 2, grid.GRID_SIZE)
+        win = cost[r1:r2, c1:c2]
+        win[~np.isfinite(win) & ~obstacle[r1:r2, c1:c2]] = grid.UNKNOWN_COST
+        cost[cell] = min(cost[cell], grid.UNKNOWN_COST)
+        dist, parent = astar.distance_field(cost, cell)
+        targets = explore.frontier_targets(mask, dist)
+        if len(targets):
+            break
     nav.frontier_count = len(targets)
     current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "frontier" else None
     goal = explore.choose_target(targets, s.pos, s.yaw, current)
@@ -626,7 +644,7 @@ def _plan_explore(rover, nav, s):
 def _plan_to(rover, nav, s, kind, goal):
     """A* to a fixed goal cell (rock, home), allowed through unmapped ground at a premium."""
     free, obstacle, _unknown = _grids(rover)
-    cost = grid.cost_grid(free, obstacle, nav.blocked, allow_unknown=True)
+    cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=True)
     start = _start_cell(cost, s)
     g = goal if np.isfinite(cost[goal]) else grid.nearest_passable(cost, goal)
     cells = astar.astar(cost, start, g) if (start is not None and g is not None) else []

@@ -12,6 +12,8 @@ import cv2
 import numpy as np
 
 FRONTIER_MIN_CELLS = 3  # smaller frontier clusters are noise, cells
+FRONTIER_WINDOW = 5  # window edge for counting unknown cells around a frontier cell, cells
+FRONTIER_MIN_UNKNOWN = 7  # unknown cells needed in that window (a lone unseen wall pixel is not a frontier)
 HEADING_WEIGHT_M_PER_RAD = 4.0  # extra cost per radian a target lies off the current heading, m/rad
 SIZE_BONUS_M_PER_CELL = 0.3  # cost discount per frontier cell (bigger = more to see), m
 SIZE_BONUS_CAP_CELLS = 20  # clusters larger than this get no further bonus, cells
@@ -25,8 +27,11 @@ REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a rev
 
 def frontier_mask(free, unknown, ignored=None):
     """Navigable cells 8-adjacent to unknown cells (minus ignored ones)."""
-    grown = cv2.dilate(unknown.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    mask = free & grown
+    unk = unknown.astype(np.uint8)
+    grown = cv2.dilate(unk, np.ones((3, 3), np.uint8)) > 0
+    around = cv2.boxFilter(unk, cv2.CV_32F, (FRONTIER_WINDOW, FRONTIER_WINDOW), normalize=False,
+                           borderType=cv2.BORDER_CONSTANT)
+    mask = free & grown & (around >= FRONTIER_MIN_UNKNOWN)
     mask[0, :] = mask[-1, :] = mask[:, 0] = mask[:, -1] = False
     if ignored is not None:
         mask &= ~ignored

@@ -15,8 +15,8 @@ FREE_COST = 1.0  # travel cost of one metre over mapped navigable ground
 UNKNOWN_COST = 4.0  # travel cost of one metre over unmapped ground (only when allowed)
 CLEARANCE_M = 2.5  # within this distance of an obstacle a cell costs extra, m
 CLEARANCE_PENALTY = 3.0  # extra cost per metre right next to an obstacle (falls linearly to 0 at CLEARANCE_M)
-HARD_CLEARANCE_M = 0.9  # cells closer than this to an obstacle are impassable unless nothing else is, m
-HARD_CLEARANCE_COST = 12.0  # cost per metre of a cell inside HARD_CLEARANCE_M (used to squeeze past)
+HARD_CLEARANCE_M = 1.5  # cells touching an obstacle (also diagonally) cost HARD_CLEARANCE_COST extra, m
+HARD_CLEARANCE_COST = 12.0  # extra cost per metre of a cell inside HARD_CLEARANCE_M (used only to squeeze past)
 
 
 def classify(worldmap, nav_confidence=None):

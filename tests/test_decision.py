@@ -114,7 +114,7 @@ def test_no_progress_with_throttle_becomes_stuck_then_backs_off_and_turns():
     turning = [c for c in during if c[0] == 0 and c[1] == 0 and abs(c[2]) == 15]
     assert turning, "recovery turns in place at full lock"
     # the cells the rover pushed against are remembered as blocked
-    assert r.nav.blocked.any()
+    assert np.isfinite(r.nav.blocked_at).any()
 
 
 def test_moving_rover_is_not_stuck():
