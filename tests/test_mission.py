@@ -66,3 +66,15 @@ def test_parse_seeds_and_summary():
     assert s["returned_home"]["min"] == 0.0 and s["fidelity_pct"]["median"] == 70.0
     md = markdown_table(rows, s)
     assert "| median |" in md and "n/a" in md
+
+
+def test_record_mode_writes_a_log_the_replay_reader_reads(world, tmp_path):
+    from replay.log_format import read_log
+
+    r = run_mission(seed=2, world=world, time_limit=2.0, out=tmp_path / "m", record=tmp_path / "rec",
+                    progress=False)
+    data = read_log(tmp_path / "rec")
+    assert len(data.frames) == r["frames"] and data.skipped == 0
+    first = data.frames[0]
+    assert (first.x, first.y) == pytest.approx(tuple(world.start_xy), abs=1e-3)
+    assert all(0.0 <= f.yaw <= 360.0 for f in data.frames)
