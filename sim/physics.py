@@ -38,6 +38,7 @@ DRAG_LINEAR = 0.052  # m/s^2 per m/s, speed-proportional resistance
 BRAKE_DECEL = 2.5  # m/s^2 per unit brake (brake is not clamped, as in the sim)
 MAX_FORWARD_SPEED = 5.0  # m/s, hard clamp (RoverController.moveSpeed)
 MAX_REVERSE_SPEED = 2.0  # m/s, hard clamp (maxReverseSpeed)
+INPUT_LIMIT = 1000.0  # |throttle|, |brake| beyond this change nothing (speed is capped) and would overflow
 
 # --- steering -------------------------------------------------------------------
 MAX_STEER_DEG = 15.0  # deg, command clamp
@@ -263,8 +264,8 @@ class RoverPhysics:
     def step(self, controls: Controls, frozen: bool = False, dt: float = PHYSICS_DT):
         s = self.state
         s.collided = False
-        throttle = float(controls.throttle)
-        brake = float(controls.brake)
+        throttle = max(-INPUT_LIMIT, min(INPUT_LIMIT, float(controls.throttle)))
+        brake = max(-INPUT_LIMIT, min(INPUT_LIMIT, float(controls.brake)))
         steer = clamp_steer(float(controls.steer))
         v0 = s.v
         if frozen:

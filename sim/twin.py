@@ -66,6 +66,8 @@ def parse_sim_float(value, name: str) -> float:
     if not isinstance(value, str):
         raise CommandError(f"{name}: expected a JSON string, got {type(value).__name__} {value!r}")
     text = value.strip()
+    if not text.isascii():  # .NET only reads ASCII digits; Python would accept e.g. Arabic-Indic
+        raise CommandError(f"{name}: not a number: {value!r}")
     try:
         number = float(text.replace(",", "")) if text else float("nan")
     except ValueError:

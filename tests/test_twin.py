@@ -191,3 +191,25 @@ def test_rendered_frame_is_a_jpeg(world_dir):
     img = cv2.imdecode(np.frombuffer(base64.b64decode(tel["image"]), np.uint8), cv2.IMREAD_COLOR)
     assert img is not None and img.shape == (160, 320, 3)
     assert not math.isnan(float(tel["pitch"]))
+
+
+def test_fuzzed_commands_never_crash_and_telemetry_stays_finite(twin):
+    rng = np.random.default_rng(0)
+    values = ["1e308", "-1e308", "0", "1", "-1", "15", "1e-320", "", " ", "nan", "1,5", "0x10",
+              "\u0661", "--1", 1, None, [], {}, True, "1e400"]
+    events = ["data", "pickup", "manual", "fixed_turn", "steer", "", None, 5]
+    twin.reset(0)
+    for _ in range(400):
+        event = events[rng.integers(len(events))]
+        payload = {k: values[rng.integers(len(values))]
+                   for k in ("throttle", "steering_angle", "brake", "angle", "time")
+                   if rng.random() < 0.8}
+        try:
+            tel = twin.step(event, payload)
+        except CommandError:
+            continue
+        assert all(isinstance(v, str) for v in tel.values())
+        for key in ("speed", "pitch", "yaw", "roll"):
+            assert math.isfinite(float(tel[key].replace(",", "")))
+        x, y = (float(v.replace(",", "")) for v in tel["position"].split(";"))
+        assert 0.0 <= x <= 200.0 and 0.0 <= y <= 200.0
