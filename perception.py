@@ -107,12 +107,12 @@ _load_camera_json()
 # =============================================================================== masks
 def navigable_mask(rgb: np.ndarray) -> np.ndarray:
     """Light floor sand: bool (160, 320), True where every channel > 160."""
-    return cv2.inRange(rgb, NAV_RGB_MIN, (255, 255, 255)).view(bool)
+    return cv2.inRange(rgb, NAV_RGB_MIN, (255, 255, 255)) > 0
 
 
 def rock_mask(rgb: np.ndarray) -> np.ndarray:
     """Gold sample-rock pixels: bool (160, 320)."""
-    return cv2.inRange(rgb, ROCK_RGB_MIN, ROCK_RGB_MAX).view(bool)
+    return cv2.inRange(rgb, ROCK_RGB_MIN, ROCK_RGB_MAX) > 0
 
 
 def obstacle_mask(rgb: np.ndarray) -> np.ndarray:
@@ -121,7 +121,7 @@ def obstacle_mask(rgb: np.ndarray) -> np.ndarray:
     rock = cv2.inRange(rgb, ROCK_RGB_MIN, ROCK_RGB_MAX)
     obs = cv2.bitwise_not(cv2.bitwise_or(nav, rock))
     obs[:_HORIZON_ROW] = 0
-    return obs.view(bool)
+    return obs > 0
 
 
 # =============================================================================== camera model
@@ -387,17 +387,28 @@ def _remember_rock(mem: PerceptionMemory, xw: float, yw: float, weight: float):
 
 
 # =============================================================================== per frame
+def _to_u8(mask: np.ndarray) -> np.ndarray:
+    """A mask as uint8 0/255 (bool or any nonzero-is-true array accepted)."""
+    if mask.dtype == np.uint8:
+        return mask if mask.max(initial=0) in (0, 255) else np.where(mask > 0, np.uint8(255), np.uint8(0))
+    return np.where(mask, np.uint8(255), np.uint8(0))
+
+
 _GRID_LUT = np.zeros(256, np.uint8)  # warped nav8 value -> label
 _GRID_LUT[0], _GRID_LUT[255], _GRID_LUT[128] = 1, 2, 0  # obstacle, navigable, outside the image
 _WARP_BORDER = 128  # value the warp gives grid cells outside the camera image
 
 
 def label_grid(nav: np.ndarray, pitch_deg=0.0, roll_deg=0.0) -> np.ndarray:
-    """Warp a camera navigable mask (uint8 0/255 or bool) onto the top-down grid.
+    """Warp a camera navigable mask (bool, or uint8 nonzero = navigable) onto the top-down grid.
 
     Returns uint8 (rows, cols): 0 unknown (outside view / too near), 1 obstacle, 2 navigable.
     """
-    nav8 = nav.view(np.uint8) * np.uint8(255) if nav.dtype == bool else nav
+    return _warp_labels(_to_u8(nav), pitch_deg, roll_deg)
+
+
+def _warp_labels(nav8: np.ndarray, pitch_deg: float, roll_deg: float) -> np.ndarray:
+    """label_grid for a uint8 0/255 mask (the hot path: no conversion)."""
     h = _LEVEL_H if (pitch_deg == 0.0 and roll_deg == 0.0) else ground_homography(pitch_deg, roll_deg)
     warped = cv2.warpPerspective(nav8, h, (_GRID_COLS, _GRID_ROWS),
                                  flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
@@ -413,8 +424,7 @@ def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
     (points [(x, y)], angles, dists) where every blob pixel column is placed on the
     floor at the blob's base row.
     """
-    if rock8.dtype == bool:
-        rock8 = rock8.view(np.uint8)
+    rock8 = _to_u8(rock8)
     bx, by, bw, bh = cv2.boundingRect(rock8)
     crop = rock8[by:by + bh, bx:bx + bw]
     n, labels, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
@@ -455,8 +465,10 @@ def _signed(deg) -> float:
 
 def vision_overlay(rgb: np.ndarray, nav: np.ndarray, rock: np.ndarray) -> np.ndarray:
     """Camera view with thresholds colour-coded: blue navigable, red obstacle (below horizon), yellow rock."""
-    nav8 = nav.view(np.uint8) * np.uint8(255) if nav.dtype == bool else nav
-    rock8 = rock.view(np.uint8) * np.uint8(255) if rock.dtype == bool else rock
+    return _overlay_u8(rgb, _to_u8(nav), _to_u8(rock))
+
+
+def _overlay_u8(rgb: np.ndarray, nav8: np.ndarray, rock8: np.ndarray) -> np.ndarray:
     obs8 = cv2.bitwise_not(cv2.bitwise_or(nav8, rock8))
     obs8[:_HORIZON_ROW] = 0
     overlay = cv2.merge([cv2.bitwise_or(obs8, rock8), rock8, nav8])
@@ -506,7 +518,7 @@ def perception_step(rover):
 
     nav8 = cv2.inRange(img, NAV_RGB_MIN, (255, 255, 255))
     rock8 = cv2.inRange(img, ROCK_RGB_MIN, ROCK_RGB_MAX)
-    grid = label_grid(nav8, pitch, roll)
+    grid = _warp_labels(nav8, pitch, roll)
     mem.last_grid = grid
 
     # decision outputs (always, even when tilted: the warp already accounts for tilt)
@@ -546,5 +558,5 @@ def perception_step(rover):
     elif window is not None or rover.rocks_world != mem.drawn_rocks:
         render_worldmap(mem, mem.worldmap, window if window is not None else (0, 0, 0, 0))
     rover.worldmap = mem.worldmap
-    rover.vision_image = vision_overlay(img, nav8, rock8)
+    rover.vision_image = _overlay_u8(img, nav8, rock8)
     return rover

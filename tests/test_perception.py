@@ -170,3 +170,15 @@ def test_client_works_without_shared_data(tmp_path):
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "ok"
+
+
+def test_bool_and_uint8_masks_give_the_same_grid():
+    img = _synthetic(sand_from_row=84)
+    nav_bool = P.navigable_mask(img)
+    assert nav_bool.view(np.uint8).max() == 1  # a real bool array, not 0/255 bytes
+    g_bool = P.label_grid(nav_bool, 0.4, -0.2)
+    g_u8 = P.label_grid(cv2.inRange(img, P.NAV_RGB_MIN, (255, 255, 255)), 0.4, -0.2)
+    np.testing.assert_array_equal(g_bool, g_u8)
+    assert (g_bool == 2).sum() > 1000
+    x, y = P.rover_coords(nav_bool)
+    assert x.size == nav_bool.sum() and np.all(x > 0.5)
