@@ -21,6 +21,8 @@ import statistics
 import time
 from pathlib import Path
 
+from sim.mission import TIME_LIMIT_S
+
 log = logging.getLogger(__name__)
 
 DEFAULT_JOBS = 2  # worker processes (the target machine has 2 cores)
@@ -139,11 +141,9 @@ def write_outputs(out: Path, results, summary, meta):
     return md
 
 
-def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=900.0, out=DEFAULT_OUT,
+def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIMIT_S, out=DEFAULT_OUT,
              progress=True) -> dict:
     from tqdm import tqdm
-
-    from sim.mission import TIME_LIMIT_S  # noqa: F401  (same default as a single mission)
 
     out = Path(out)
     tasks = [(s, time_limit, str(out)) for s in seeds]
@@ -177,7 +177,7 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", default="0-19", help="e.g. 0-19 or 1,5,9")
     p.add_argument("--world", default="default", help="real | procedural:K | PATH.png (default: real if present)")
     p.add_argument("--jobs", type=int, default=DEFAULT_JOBS, help="worker processes")
-    p.add_argument("--time-limit", type=float, default=900.0, help="simulated seconds per mission")
+    p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, help="simulated seconds per mission")
     p.add_argument("--out", default=DEFAULT_OUT)
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--log-level", default="INFO")

@@ -256,11 +256,8 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
     The client's worldmap lives in the other process, so mapped/fidelity/located are
     not available here (None); everything truth-based is.
     """
-    from sim.mission import StuckMeter, _progress, _recorder
-    from sim.samples import PICKUP_DURATION_S  # noqa: F401  (documents the dependency)
+    from sim.mission import HOME_RADIUS_M, StuckMeter, _progress, _recorder
     from sim.twin import RoverTwin
-
-    from sim.mission import HOME_RADIUS_M
 
     twin = RoverTwin(world, seed=seed, render=render)
     port = free_port()
