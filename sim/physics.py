@@ -58,6 +58,7 @@ MAX_DYNAMIC_PITCH = 5.0  # deg, clamp of the motion-induced pitch
 MAX_DYNAMIC_ROLL = 6.0  # deg, clamp of the motion-induced roll
 PITCH_PROBE_M = 0.40  # m, half distance of the front/rear terrain probes
 ROLL_PROBE_M = 0.40  # m, half distance of the left/right terrain probes
+TURN_PITCH_FADE_DEG_S = 25.0  # deg/s of yaw rate at which acceleration pitch has faded out (log: ~0 in hard turns)
 ATTITUDE_ACCEL_CLAMP = 3.0  # m/s^2, accelerations beyond this (impacts) do not tilt further
 
 # --- collision ------------------------------------------------------------------------
@@ -315,7 +316,8 @@ class RoverPhysics:
         a_lat = s.v * math.radians(s.yaw_rate)
         a_lat = max(-2 * ATTITUDE_ACCEL_CLAMP, min(2 * ATTITUDE_ACCEL_CLAMP, a_lat))
         w2, c = ATTITUDE_OMEGA ** 2, 2 * ATTITUDE_DAMPING * ATTITUDE_OMEGA
-        target_p = PITCH_PER_ACCEL * a_long
+        fade = max(0.0, 1.0 - abs(s.yaw_rate) / TURN_PITCH_FADE_DEG_S)
+        target_p = PITCH_PER_ACCEL * a_long * fade
         target_r = ROLL_PER_LATERAL * a_lat
         s.pitch_rate += (w2 * (target_p - s.pitch_dyn) - c * s.pitch_rate) * dt
         s.pitch_dyn += s.pitch_rate * dt
