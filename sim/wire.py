@@ -145,6 +145,10 @@ class WireSimulator:
             self.rejected += 1
             log.warning("no telemetry reply (the real simulator would stall): %s", exc)
             return
+        except Exception:  # a twin bug must not kill the simulator: Unity logs and carries on
+            self.rejected += 1
+            log.exception("error handling %r; no telemetry reply", event)
+            return
         self._send_telemetry(tel)
 
     def _handle_frame(self, frame):

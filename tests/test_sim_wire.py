@@ -101,16 +101,18 @@ def test_lockstep_against_real_client_server(tmp_path):
 
     twin.step = spy
     port = free_port()
+    # the simulator starts first and keeps reconnecting until the client server is up
+    sim = WireSimulator(twin, port=port, mode="lockstep", should_stop=lambda: twin.frame >= FRAMES)
+    runner = threading.Thread(target=sim.run, daemon=True)
+    runner.start()
     proc = start_client_server(port, tmp_path / "drive_rover.log")
     try:
         assert wait_for_port(port, proc), (tmp_path / "drive_rover.log").read_text()[-2000:]
-        sim = WireSimulator(twin, port=port, mode="lockstep", should_stop=lambda: twin.frame >= FRAMES)
-        runner = threading.Thread(target=sim.run, daemon=True)
-        runner.start()
         runner.join(timeout=240)
         sim.stop()
         runner.join(timeout=10)
     finally:
+        sim.stop()
         stop_process(proc)
     assert twin.frame >= FRAMES, (tmp_path / "drive_rover.log").read_text()[-2000:]
     assert sim.rejected == 0 and sim.connections == 1
