@@ -37,7 +37,7 @@ JPEG_QUALITY = 75  # Texture2D.EncodeToJPG default quality
 FAR_M = 120.0  # rays that hit nothing within this horizontal distance show the far colour, m
 FINE_STEP_MIN_M = 0.04  # smallest march step near the camera, m
 FINE_STEP_PER_M = 0.012  # march step growth with distance, m per m
-REFINE_ITERS = 6  # bisection steps locating a surface between two march samples
+REFINE_ITERS = 4  # bisection steps locating a rock surface between two march samples
 COARSE_CELL_M = 1.0  # empty-space-skipping cell size, m
 GAP_MIN_M = 0.3  # rock bottom this far above the ground leaves a see-through gap, m
 GAP_MAX_GROUND_M = 0.5  # gaps are kept only over floor this low (wall rocks are drawn solid), m
@@ -201,7 +201,10 @@ def bake_rasters(world: World):
                    ground_rgb * rough[..., None])
     colour = np.clip(rgb * light[..., None], 0, 255).astype(np.uint8)
     # floor seen under an overhang: plain sunlit ground (the real frames show it bright)
-    under = np.clip(ground_rgb * slope_shade[..., None], 0, 255).astype(np.uint8)
+    ggy, ggx = np.gradient(ground, cell)
+    ground_lambert = np.clip((-ggx * sun[0] - ggy * sun[1] + sun[2]) / np.sqrt(ggx ** 2 + ggy ** 2 + 1), 0, 1)
+    ground_shade = (1.0 - SLOPE_SHADE) + SLOPE_SHADE * ground_lambert / math.sin(el)
+    under = np.clip(ground_rgb * ground_shade[..., None], 0, 255).astype(np.uint8)
     colour_under = np.where(has_gap[..., None], under, colour)
     cmax = _coarse_max(top, int(round(COARSE_CELL_M / cell)))
     return {"top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
@@ -271,11 +274,11 @@ def _solid(ground, slab_lo, slab_hi, inv_cell, x, y, z):
     return 0
 
 
-@njit(cache=True, nogil=True)
-def _render_kernel(img, depth, hitpos, ground, slab_lo, slab_hi, colour, colour_under, cmax, cell, coarse_m, rot, origin,
+@njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
+def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colour_under, cmax, cell, coarse_m, rot, origin,
                    ray_a, ray_b, far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, world_size, dist_darken, dist_scale):
-    h_img, w_img = img.shape[0], img.shape[1]
+    w_img, h_img = img_t.shape[0], img_t.shape[1]
     inv_cell = 1.0 / cell
     n = ground.shape[0]
     nc = cmax.shape[0]
@@ -286,9 +289,9 @@ def _render_kernel(img, depth, hitpos, ground, slab_lo, slab_hi, colour, colour_
         for v in range(h_img - 1, -1, -1):
             if sky_rest:
                 for ch in range(3):
-                    img[v, u, ch] = sky_rgb[ch]
-                depth[v, u] = np.inf
-                hitpos[v, u, 0] = np.nan
+                    img_t[u, v, ch] = sky_rgb[ch]
+                depth_t[u, v] = np.inf
+                hit_t[u, v, 0] = np.nan
                 continue
             a = ray_a[u]
             b = ray_b[v]
@@ -355,7 +358,14 @@ def _render_kernel(img, depth, hitpos, ground, slab_lo, slab_hi, colour, colour_
             if hit == 1:
                 lo = s_free
                 hi = s
-                if hi > lo:
+                if state == 1 and hi > lo:
+                    # terrain: one secant step on z - ground (smooth surface)
+                    f_lo = (oz + lo * k) - _top_at(ground, inv_cell, ox + lo * hx, oy + lo * hy)
+                    f_hi = z - _top_at(ground, inv_cell, x, y)
+                    if f_lo > 0.0 and f_hi <= 0.0 and f_lo - f_hi > 1e-9:
+                        hi = lo + (hi - lo) * f_lo / (f_lo - f_hi)
+                elif hi > lo:
+                    # rock slab: bisection (nearest-cell slabs have vertical sides)
                     for _ in range(refine_iters):
                         mid = 0.5 * (lo + hi)
                         st = _solid(ground, slab_lo, slab_hi, inv_cell, ox + mid * hx,
@@ -389,24 +399,24 @@ def _render_kernel(img, depth, hitpos, ground, slab_lo, slab_hi, colour, colour_
                 for ch in range(3):
                     val = ((src[r0, c0, ch] * (1 - tx) + src[r0, c0 + 1, ch] * tx) * (1 - ty)
                            + (src[r0 + 1, c0, ch] * (1 - tx) + src[r0 + 1, c0 + 1, ch] * tx) * ty)
-                    img[v, u, ch] = np.uint8(min(255.0, val * shade + 0.5))
-                depth[v, u] = s / hlen
-                hitpos[v, u, 0] = x
-                hitpos[v, u, 1] = y
-                hitpos[v, u, 2] = z
+                    img_t[u, v, ch] = np.uint8(min(255.0, val * shade + 0.5))
+                depth_t[u, v] = s / hlen
+                hit_t[u, v, 0] = x
+                hit_t[u, v, 1] = y
+                hit_t[u, v, 2] = z
                 s_start = s if gap_first < 0.0 else min(s, gap_first)
             elif hit == 2:
                 for ch in range(3):
-                    img[v, u, ch] = sky_rgb[ch]
-                depth[v, u] = np.inf
-                hitpos[v, u, 0] = np.nan
+                    img_t[u, v, ch] = sky_rgb[ch]
+                depth_t[u, v] = np.inf
+                hit_t[u, v, 0] = np.nan
                 sky_rest = gap_first < 0.0
                 s_start = s if gap_first < 0.0 else gap_first
             else:
                 for ch in range(3):
-                    img[v, u, ch] = far_rgb[ch]
-                depth[v, u] = np.inf
-                hitpos[v, u, 0] = np.nan
+                    img_t[u, v, ch] = far_rgb[ch]
+                depth_t[u, v] = np.inf
+                hit_t[u, v, 0] = np.nan
                 s_start = far_m if gap_first < 0.0 else gap_first
 
 
@@ -450,15 +460,19 @@ class Renderer:
         samples: iterable of (x, y, scale, yaw_deg) gold sample rocks to draw.
         """
         origin, rot = self.camera(pose)
-        img = np.empty((IMAGE_H, IMAGE_W, 3), np.uint8)
-        depth = np.empty((IMAGE_H, IMAGE_W), np.float32)
-        hitpos = np.empty((IMAGE_H, IMAGE_W, 3), np.float32)
-        _render_kernel(img, depth, hitpos, self._ground, self._slab_lo, self._slab_hi, self.colour_map,
+        # column-major buffers: the kernel walks columns, so it writes contiguous memory
+        img_t = np.empty((IMAGE_W, IMAGE_H, 3), np.uint8)
+        depth_t = np.empty((IMAGE_W, IMAGE_H), np.float32)
+        hit_t = np.empty((IMAGE_W, IMAGE_H, 3), np.float32)
+        _render_kernel(img_t, depth_t, hit_t, self._ground, self._slab_lo, self._slab_hi, self.colour_map,
                        self._colour_under,                       self._cmax, float(self.world.rock_cell_m), COARSE_CELL_M,
                        np.ascontiguousarray(rot), origin, self._ray_a, self._ray_b, FAR_M,
                        FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self._zmax, self._sky,
                        self._far, UNDERSIDE_SHADE, float(self.world.size_m), DIST_DARKEN,
                        DIST_SCALE_M)
+        img = np.ascontiguousarray(img_t.transpose(1, 0, 2))
+        depth = np.ascontiguousarray(depth_t.T)
+        hitpos = hit_t.transpose(1, 0, 2)
         for sample in samples:
             self._draw_sample(img, depth, origin, rot, sample)
         self.last_depth = depth  # distance along the ray / |forward|, inf for sky
@@ -505,14 +519,14 @@ class Renderer:
         hit &= (t > 0) & (t < depth[v0:v1, u0:u1])
         if not hit.any():
             return
-        p_l = o_l[None, None] + t[..., None] * d_l
+        p_l = o_l[None] + t[hit][:, None] * d_l[hit]
         normal_w = (p_l / axes) @ basis  # gradient of the ellipsoid, back in world axes
         normal_w /= np.linalg.norm(normal_w, axis=-1, keepdims=True) + 1e-12
         az, el = math.radians(SUN_AZIMUTH_DEG), math.radians(SUN_ELEVATION_DEG)
         sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
         lam = np.clip(normal_w @ sun, 0.0, 1.0)
         shade = SAMPLE_MIN_SHADE + (1.0 - SAMPLE_MIN_SHADE) * lam
-        rgb = np.clip(np.array(SAMPLE_RGB)[None, None] * shade[..., None] * 255.0, 0, 255)
+        rgb = np.clip(np.array(SAMPLE_RGB)[None] * shade[:, None] * 255.0, 0, 255)
         patch = img[v0:v1, u0:u1]
-        patch[hit] = rgb[hit].astype(np.uint8)
+        patch[hit] = rgb.astype(np.uint8)
         depth[v0:v1, u0:u1][hit] = t[hit]

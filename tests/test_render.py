@@ -1,0 +1,167 @@
+"""Renderer: shape and layout of frames, sample rocks visible to the client, bad poses."""
+import importlib
+
+import cv2
+import numpy as np
+import pytest
+
+from sim.render import IMAGE_H, IMAGE_W, Renderer, body_rotation, encode_jpeg
+from sim.world import World, load_world
+
+
+def _flat_world(size=200.0):
+    """A level sand floor, no walls or rocks: the simplest scene to reason about."""
+    return World(
+        terrain_height=np.zeros((513, 513), np.float32),
+        sand_weight=np.ones((512, 512), np.float32),
+        rock_top=np.zeros((2001, 2001), np.float32),
+        rock_bottom=np.zeros((2001, 2001), np.float32),
+        nav_truth=np.full((200, 200), 255, np.uint8),
+        sample_spots=np.zeros((0, 2)),
+        start_xy=(100.0, 100.0), start_yaw_training=0.0, name="flat")
+
+
+@pytest.fixture(scope="module")
+def flat_renderer():
+    return Renderer(_flat_world())
+
+
+@pytest.fixture(scope="module")
+def canyon_renderer():
+    return Renderer(load_world("procedural:0"))
+
+
+def _navigable(rgb):
+    return np.all(rgb > 160, axis=2)
+
+
+def test_frame_shape_dtype(flat_renderer):
+    img = flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0))
+    assert img.shape == (IMAGE_H, IMAGE_W, 3) and img.dtype == np.uint8
+
+
+def test_sky_on_top_floor_below_on_flat_ground(flat_renderer):
+    img = flat_renderer.render((100.0, 100.0, 30.0, 0.0, 0.0))
+    nav = _navigable(img)
+    assert nav[100:].mean() > 0.99  # floor below the horizon (row 80) is light sand
+    assert nav[:78].mean() == 0.0  # sky above it is not
+    assert np.isinf(flat_renderer.last_depth[:78]).all()
+    # floor distance follows the camera geometry: bottom row ~0.31 m ahead of the camera
+    assert 0.25 < flat_renderer.last_depth[-1, 160] < 0.4
+
+
+def test_pitch_moves_horizon(flat_renderer):
+    """Positive pitch is nose down, so the horizon moves up in the image."""
+    def horizon_row(img):
+        col = _navigable(img)[:, 160]
+        return int(np.argmax(col))
+
+    level = horizon_row(flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0)))
+    nose_down = horizon_row(flat_renderer.render((100.0, 100.0, 0.0, 5.0, 0.0)))
+    assert nose_down < level - 5
+
+
+def test_roll_tilts_horizon(flat_renderer):
+    """Positive roll lifts the right side: the horizon drops on the right of the image."""
+    img = flat_renderer.render((100.0, 100.0, 0.0, 0.0, 5.0))
+    nav = _navigable(img)
+    left, right = int(np.argmax(nav[:, 20])), int(np.argmax(nav[:, 300]))
+    assert right > left + 5
+
+
+def test_body_rotation_axes():
+    rot = body_rotation(90.0, 0.0, 0.0)  # facing north
+    np.testing.assert_allclose(rot[:, 2], [0, 1, 0], atol=1e-12)  # forward
+    np.testing.assert_allclose(rot[:, 0], [1, 0, 0], atol=1e-12)  # right = east
+    rot = body_rotation(0.0, 10.0, 0.0)  # facing east, nose down
+    assert rot[2, 2] < 0
+
+
+def test_canyon_has_floor_and_walls(canyon_renderer):
+    w = canyon_renderer.world
+    img = canyon_renderer.render((*w.start_xy, w.start_yaw_training, 0.0, 0.0))
+    nav = _navigable(img)
+    assert nav[140:].mean() > 0.5  # standing on floor
+    assert not nav.all()
+
+
+@pytest.mark.parametrize("distance", [1.0, 2.0, 3.0, 4.0, 5.0])
+def test_sample_rock_visible_to_client_threshold(flat_renderer, distance):
+    perception = pytest.importorskip("perception", reason="perception.py (client) not present yet")
+    x0, y0 = 100.0, 100.0
+    cam_ahead = 0.4287
+    pose = (x0, y0, 0.0, 0.0, 0.0)  # facing east
+    sample = (x0 + cam_ahead + distance, y0 + 0.2, 0.36, 30.0)  # smallest spawn scale
+    img = flat_renderer.render(pose, samples=[sample])
+    assert perception.rock_mask(img).sum() >= 4
+    if distance > 3.0:
+        return  # farther, the smallest rock is ~3 px wide: JPEG chroma subsampling may wash it out
+    # and still after the simulator's JPEG encoding
+    decoded = cv2.cvtColor(cv2.imdecode(np.frombuffer(encode_jpeg(img), np.uint8), cv2.IMREAD_COLOR),
+                           cv2.COLOR_BGR2RGB)
+    assert perception.rock_mask(decoded).sum() >= 1
+    plain = flat_renderer.render(pose)
+    assert perception.rock_mask(plain).sum() == 0
+
+
+def test_sample_rock_size_and_colour(flat_renderer):
+    img = flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0), samples=[(101.43, 100.0, 0.5, 0.0)])
+    gold = (img[..., 0] > 150) & (img[..., 1] > 120) & (img[..., 2] < 60)
+    ys, xs = np.nonzero(gold)
+    assert xs.size > 0
+    width_px = xs.max() - xs.min() + 1  # at 1 m from the camera: ~0.19 m * 114 px/m
+    assert 14 <= width_px <= 28
+    assert abs(xs.mean() - 160) < 4
+
+
+def test_sample_hidden_behind_wall(canyon_renderer):
+    """Depth test: a sample far behind the viewer's wall does not show."""
+    w = canyon_renderer.world
+    pose = (*w.start_xy, 0.0, 0.0, 0.0)
+    base = canyon_renderer.render(pose)
+    far_sample = (min(w.start_xy[0] + 60.0, 199.0), w.start_xy[1], 0.5, 0.0)
+    img = canyon_renderer.render(pose, samples=[far_sample])
+    depth_along = canyon_renderer.last_depth[80:, 150:170]
+    if np.isfinite(depth_along).all() and depth_along.max() < 50:
+        assert np.array_equal(base, img)
+
+
+def test_out_of_world_and_inside_rock_poses_render(canyon_renderer):
+    w = canyon_renderer.world
+    for pose in [(-50.0, -50.0, 0.0, 0.0, 0.0), (500.0, 100.0, 180.0, 0.0, 0.0),
+                 (100.0, 100.0, 0.0, 359.0, 1.0), (100.0, 100.0, 720.0, -30.0, 60.0)]:
+        img = canyon_renderer.render(pose)
+        assert img.shape == (160, 320, 3)
+    # out-of-world poses are clamped to the border
+    np.testing.assert_array_equal(canyon_renderer.render((-5.0, 50.0, 0.0, 0.0, 0.0)),
+                                  canyon_renderer.render((0.0, 50.0, 0.0, 0.0, 0.0)))
+    if w.obstacles:
+        rock = w.obstacles[0]
+        img = canyon_renderer.render((rock["x"], rock["y"], 0.0, 0.0, 0.0))
+        assert img.shape == (160, 320, 3)
+
+
+@pytest.mark.parametrize("pose", [(float("nan"), 1.0, 0.0, 0.0, 0.0), (1.0, 1.0, float("inf"), 0.0, 0.0),
+                                  (1.0, 2.0, 3.0), ("a", 1, 1, 1, 1)])
+def test_bad_pose_raises_value_error(flat_renderer, pose):
+    with pytest.raises(ValueError):
+        flat_renderer.render(pose)
+
+
+def test_encode_jpeg_roundtrip(flat_renderer):
+    img = flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0))
+    data = encode_jpeg(img)
+    assert data[:2] == b"\xff\xd8"
+    decoded = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    assert decoded.shape == (160, 320, 3)
+    assert np.abs(decoded[..., ::-1].astype(int) - img.astype(int)).mean() < 6
+
+
+def test_real_world_start_view(world_dir):
+    w = load_world("real")
+    r = Renderer(w)
+    img = r.render((*w.start_xy, w.start_yaw_training, 0.0, 0.0))
+    nav = _navigable(img)
+    assert nav[120:].mean() > 0.9  # the start looks down a sandy valley
+    assert nav[:60].mean() < 0.05  # walls and sky above
+    assert importlib.import_module("sim.render").IMAGE_W == 320
