@@ -36,6 +36,7 @@ STUCK_SPEED = 0.2  # m/s, below this while commanding throttle counts as stuck
 STUCK_THROTTLE = 0.05  # |throttle| above this is "commanding throttle"
 PROGRESS_WINDOW_S = 10.0  # s, no-progress window
 PROGRESS_MIN_M = 0.5  # m, moving less than this over the window (not picking up) = stuck
+STUCK_REPORT_MIN_S = 5.0  # s, stuck stretches at least this long are listed (time, place) in the JSON
 MAP_PNG_SCALE = 4  # px per metre in the mission PNG
 DEFAULT_OUT_ROOT = "out"  # default output folder root
 
@@ -87,7 +88,9 @@ class StuckMeter:
     def __init__(self):
         self.total_s = 0.0
         self.longest_s = 0.0
+        self.stretches = []  # [t_start, x, y, duration_s] of stretches >= STUCK_REPORT_MIN_S
         self._run_s = 0.0
+        self._run_start = None
         self._hist = deque()  # (t, x, y, picking)
 
     def update(self, t, dt, x, y, v, throttle, picking):
@@ -100,11 +103,20 @@ class StuckMeter:
             x0, y0 = self._hist[0][1], self._hist[0][2]
             no_progress = math.hypot(x - x0, y - y0) < PROGRESS_MIN_M
         if (slow or no_progress) and not picking:
+            if self._run_s == 0.0:
+                self._run_start = (round(t - dt, 2), round(x, 2), round(y, 2))
             self.total_s += dt
             self._run_s += dt
             self.longest_s = max(self.longest_s, self._run_s)
         else:
-            self._run_s = 0.0
+            self.close_run()
+
+    def close_run(self):
+        """End the current stuck stretch (also call at the end of a mission)."""
+        if self._run_s >= STUCK_REPORT_MIN_S and self._run_start is not None:
+            self.stretches.append([*self._run_start, round(self._run_s, 2)])
+        self._run_s = 0.0
+        self._run_start = None
 
 
 @dataclass
@@ -129,6 +141,7 @@ class MissionResult:
     wall_s: float
     frames_per_s: float
     rejected_commands: int
+    stuck_stretches: list = field(default_factory=list)  # [t, x, y, duration_s] >= STUCK_REPORT_MIN_S
     files: dict = field(default_factory=dict)
 
     def as_dict(self):
@@ -136,7 +149,7 @@ class MissionResult:
 
 
 # ----------------------------------------------------------------------------- the PNG
-def mission_image(world, worldmap, trajectory, initial_samples, collected_xy, start_xy):
+def mission_image(world, worldmap, trajectory, initial_samples, collected_xy, start_xy, stuck_xy=()):
     """BGR image, north up: truth grey, mapped navigable blue, obstacles red, trail yellow."""
     import cv2
 
@@ -164,6 +177,8 @@ def mission_image(world, worldmap, trajectory, initial_samples, collected_xy, st
     for smp in initial_samples:
         got = (round(smp[0], 3), round(smp[1], 3)) in collected
         cv2.circle(big, px(*smp[:2]), 6, (0, 255, 0) if got else (0, 200, 255), 2)
+    for x, y in stuck_xy:
+        cv2.drawMarker(big, px(x, y), (0, 0, 255), cv2.MARKER_TILTED_CROSS, 12, 2)
     cv2.drawMarker(big, px(*start_xy), (255, 255, 255), cv2.MARKER_CROSS, 14, 2)
     if len(trajectory):
         cv2.circle(big, px(*trajectory[-1]), 4, (255, 255, 255), -1)
@@ -286,7 +301,7 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
         frames=tr.frame, distance_m=round(summary["distance"], 2),
         final_distance_to_start_m=round(home, 2), wall_s=round(wall, 2),
         frames_per_s=round(tr.frame / wall, 1) if wall > 0 else float("nan"),
-        rejected_commands=summary["rejected"])
+        rejected_commands=summary["rejected"], stuck_stretches=list(summary["stuck"].stretches))
 
 
 def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,
@@ -305,13 +320,15 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
         summary = run_inprocess(world_obj, seed, time_limit=time_limit, video=video, record=record,
                                 progress=progress, render=render)
         mode = "inprocess"
+    summary["stuck"].close_run()
     result = score(world_obj, seed, mode, summary, time_limit)
     if write_files:
         out = Path(out) if out else Path(DEFAULT_OUT_ROOT) / f"mission-seed{seed}"
         tr = summary["twin"].truth
         img = mission_image(world_obj, summary.get("worldmap"), summary["traj"],
                             [(s.x, s.y) for s in tr.initial_samples],
-                            [(s.x, s.y) for s in tr.collected], tr.start_xy)
+                            [(s.x, s.y) for s in tr.collected], tr.start_xy,
+                            [(st[1], st[2]) for st in result.stuck_stretches])
         write_png_atomic(out / "mission.png", img)
         result.files = {"json": str(out / "mission.json"), "png": str(out / "mission.png")}
         if video:

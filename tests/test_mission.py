@@ -31,6 +31,7 @@ def test_short_mission_writes_metrics_and_png(world, tmp_path):
     assert data["mapped_pct"] > 0.5  # and mapped something
     assert data["rejected_commands"] == 0
     assert data["longest_stuck_s"] <= data["stuck_time_s"] <= data["time_s"]
+    assert isinstance(data["stuck_stretches"], list)
 
 
 def test_stuck_meter_counts_throttle_without_motion():
@@ -44,10 +45,17 @@ def test_stuck_meter_counts_throttle_without_motion():
         m.update(t, 0.04, 10.0 + t, 10.0, 1.0, 1.0, False)
     assert m.total_s == pytest.approx(4.0, abs=0.05)
     assert m.longest_s == pytest.approx(4.0, abs=0.05)
+    assert m.stretches == []  # shorter than STUCK_REPORT_MIN_S
     for _ in range(50):  # picking up is not stuck
         t += 0.04
         m.update(t, 0.04, 12.0, 10.0, 0.0, 1.0, True)
     assert m.total_s == pytest.approx(4.0, abs=0.05)
+    for _ in range(200):  # 8 s against a wall at (12, 10)
+        t += 0.04
+        m.update(t, 0.04, 12.0, 10.0, 0.0, 1.0, False)
+    m.close_run()
+    assert len(m.stretches) == 1 and m.stretches[0][1:3] == [12.0, 10.0]
+    assert m.stretches[0][3] == pytest.approx(8.0, abs=0.05)
 
 
 def test_parse_seeds_and_summary():
