@@ -202,9 +202,15 @@ class LogData:
 _NUMBER_RE = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 
 
-def parse_number(text: str) -> Optional[float]:
-    """A logged number (plain or scientific), or None when corrupt (``___.01``)."""
+def parse_number(text: str, decimal_comma: bool = False) -> Optional[float]:
+    """A logged number (plain or scientific), or None when corrupt (``___.01``).
+
+    ``decimal_comma``: the log came from a comma-decimal locale (``0,25`` in a
+    ``;``-separated file, as .NET's float.ToString writes it on e.g. de-DE).
+    """
     t = text.strip()
+    if decimal_comma and "," in t and "." not in t:
+        t = t.replace(",", ".", 1)
     if not _NUMBER_RE.match(t):
         return None
     v = float(t)
@@ -251,6 +257,12 @@ def _check_header(fields: List[str], p: Path) -> dict:
     return {c: lower[c.lower()] for c in COLUMNS}
 
 
+def _looks_like_data_row(fields: List[str]) -> bool:
+    """A first line that is really a data row: 10 fields, a .jpg path, then numbers."""
+    return (len(fields) == len(COLUMNS) and fields[0].strip().lower().endswith(".jpg")
+            and all(parse_number(f, True) is not None for f in fields[1:]))
+
+
 def _frame_file_name(path_field: str) -> str:
     """File name of a logged path from any OS (``C:\\a\\b.jpg`` or ``/a/b.jpg``)."""
     return re.split(r"[\\/]", path_field.strip())[-1]
@@ -287,9 +299,14 @@ def read_log(path, require_images: bool = True) -> LogData:
         raise LogFormatError(f"{p}: empty file, not a simulator log")
     sep = _sniff_separator(lines[0], p)
     header = next(csv.reader(io.StringIO(lines[0]), delimiter=sep))
-    cols = _check_header(header, p)
     data = LogData(log_path=p, separator=sep)
     warn = _Warner(data)
+    if _looks_like_data_row(header):  # header line lost (hand-edited or concatenated logs)
+        warn("header", f"{p}: no header line; assuming the simulator's column order {SEPARATOR.join(COLUMNS)}")
+        header = list(COLUMNS)
+        lines = [SEPARATOR.join(COLUMNS)] + lines
+    cols = _check_header(header, p)
+    decimal_comma = sep != ","
     img_dir = p.parent / IMG_DIR
     seen_names = set()
     numeric = COLUMNS[1:]
@@ -303,7 +320,7 @@ def read_log(path, require_images: bool = True) -> LogData:
         values = {}
         bad = None
         for c in numeric:
-            v = parse_number(fields[cols[c]])
+            v = parse_number(fields[cols[c]], decimal_comma)
             if v is None:
                 bad = (c, fields[cols[c]])
                 break

@@ -130,3 +130,20 @@ def test_megalphian_log_resolves_foreign_paths(real_logs_dir):
     data = read_log(real_logs_dir / "megalphian")
     assert len(data.frames) == 6150
     assert data.duplicate_rows == 2
+
+
+def test_reader_accepts_decimal_comma_locale(tmp_path):
+    row = ";".join(["C:\\rec\\IMG\\" + NAMES[0], "-1,5", "0,2", "0", "1,25", "99,67", "85,59",
+                    "359,5", "56,8", "2,093137E-07"])
+    data = read_log(_make_log(tmp_path, [row], NAMES[:1]))
+    f = data.frames[0]
+    assert (f.steer, f.throttle, f.speed, f.x, f.pitch) == (-1.5, 0.2, 1.25, 99.67, 359.5)
+    assert f.roll == pytest.approx(2.093137e-07)
+
+
+def test_reader_accepts_a_log_without_header(tmp_path, caplog):
+    path = _make_log(tmp_path, [_row(n) for n in NAMES[1:3]], NAMES[:3], header=_row(NAMES[0]))
+    with caplog.at_level(logging.WARNING):
+        data = read_log(path)
+    assert [f.image_path.name for f in data.frames] == NAMES[:3]
+    assert "no header" in caplog.text
