@@ -46,6 +46,7 @@ WHEEL_LOCK_SLOW_DEG = 15.0  # deg, front-wheel lock at standstill
 WHEEL_LOCK_FAST_DEG = 5.0  # deg, front-wheel lock at MAX_FORWARD_SPEED
 REVERSE_STEER_GAIN = 2.0  # wheel angle multiplier when the last throttle was negative
 WHEELBASE_M = 0.722  # m, kinematic bicycle length
+YAW_SLIP_FACTOR = 0.93  # achieved / kinematic yaw rate at full lock (tyre slip; megalphian 0.3-5 m/s, test_dataset)
 TURN_IN_PLACE_RATE = 45.0  # deg/s at full lock when turning in place
 TURN_IN_PLACE_MAX_SPEED = 0.316  # m/s, turning in place only below this (sqrMagnitude < 0.1)
 
@@ -190,7 +191,7 @@ def yaw_rate_deg(steer_cmd: float, speed: float, throttle: float, brake: float,
     if steer != 0.0 and throttle == 0.0 and brake == 0.0 and abs(speed) < TURN_IN_PLACE_MAX_SPEED:
         return TURN_IN_PLACE_RATE * steer / MAX_STEER_DEG
     delta = math.radians(front_wheel_angle_deg(steer, speed, reversing))
-    return math.degrees(speed / WHEELBASE_M * math.tan(delta))
+    return YAW_SLIP_FACTOR * math.degrees(speed / WHEELBASE_M * math.tan(delta))
 
 
 def longitudinal_step(v: float, throttle: float, brake: float, slope_sin: float, dt: float) -> float:
