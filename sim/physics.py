@@ -10,8 +10,9 @@ kinematic bicycle for heading, with every constant fitted to the real recordings
   brake 1 ~ -2.5 m/s^2; gravity along the slope (the real rover cannot climb
   more than ~5 deg from rest either);
 * hard caps of 5 m/s forward and 2 m/s reverse (RoverController.cs);
-* front-wheel angle (cmd/15)*lerp(5, 15, 1-|v|/5) deg, doubled when the last
-  throttle was negative; turn in place at 45 deg/s * cmd/15 when steering with no
+* front-wheel angle (cmd/15)*lerp(5, 15, 1-|v|/5) deg, doubled while the
+  throttle is negative (coasting backwards at throttle 0 is not doubled in the
+  megalphian log), times a 0.93 slip factor fitted to real full-lock turns; turn in place at 45 deg/s * cmd/15 when steering with no
   throttle, no brake and |v| < 0.316 m/s;
 * pitch/roll = terrain attitude under the wheels + a damped spring driven by the
   longitudinal and lateral acceleration (~1.2 deg accelerating, ~1.4 deg in a
@@ -44,7 +45,7 @@ INPUT_LIMIT = 1000.0  # |throttle|, |brake| beyond this change nothing (speed is
 MAX_STEER_DEG = 15.0  # deg, command clamp
 WHEEL_LOCK_SLOW_DEG = 15.0  # deg, front-wheel lock at standstill
 WHEEL_LOCK_FAST_DEG = 5.0  # deg, front-wheel lock at MAX_FORWARD_SPEED
-REVERSE_STEER_GAIN = 2.0  # wheel angle multiplier when the last throttle was negative
+REVERSE_STEER_GAIN = 2.0  # wheel angle multiplier while the throttle command is negative
 WHEELBASE_M = 0.722  # m, kinematic bicycle length
 YAW_SLIP_FACTOR = 0.93  # achieved / kinematic yaw rate at full lock (tyre slip; megalphian 0.3-5 m/s, test_dataset)
 TURN_IN_PLACE_RATE = 45.0  # deg/s at full lock when turning in place
@@ -88,7 +89,7 @@ class BodyState:
     y: float
     yaw: float  # deg CCW from +x, [0, 360)
     v: float = 0.0  # m/s along the heading, negative = reverse
-    reversing: bool = False  # last nonzero throttle was negative (doubles the wheel angle)
+    reversing: bool = False  # throttle command is negative (doubles the wheel angle)
     pitch_dyn: float = 0.0  # deg, motion part of pitch (positive = nose down)
     pitch_rate: float = 0.0
     roll_dyn: float = 0.0  # deg, motion part of roll (positive = right side up)
@@ -282,10 +283,7 @@ class RoverPhysics:
             if abs(s.fixed_turn_left) < 1e-9:
                 s.fixed_turn_left = 0.0
         else:
-            if throttle < 0:
-                s.reversing = True
-            elif throttle > 0:
-                s.reversing = False
+            s.reversing = throttle < 0  # megalphian: coasting backwards (throttle 0) is not doubled
             slope_sin = math.sin(math.radians(s.pitch_terrain))
             s.v = longitudinal_step(s.v, throttle, brake, slope_sin, dt)
             rate = yaw_rate_deg(steer, s.v, throttle, brake, s.reversing)

@@ -172,3 +172,31 @@ def test_fixed_turn_is_clockwise(flat_world):
     assert body.start_fixed_turn(90.0, 1.0)
     _run(body, P.Controls(), 1.5)
     assert body.state.yaw == pytest.approx(0.0, abs=1e-6) or body.state.yaw == pytest.approx(360.0)
+
+
+def test_two_second_windows_of_megalphian_drive(real_logs_dir, world_dir):
+    """From logged states, 2 s of logged commands land where the real rover did."""
+    from sim.world import load_world
+
+    world = load_world("real")
+    t, a = _read_log(real_logs_dir / "megalphian" / "robot_log.csv")
+    steer, thr, brake, speed, x, y, yaw = (a[:, i] for i in (0, 1, 2, 3, 4, 5, 7))
+    err_v, err_yaw, err_pos = [], [], []
+    for i0 in range(0, len(t) - 80, 50):
+        i1 = int(np.searchsorted(t, t[i0] + 2.0))
+        if i1 >= len(t) or t[i1] - t[i0] > 2.3:
+            continue
+        body = P.RoverPhysics(world, x[i0], y[i0], yaw[i0])
+        body.state.v = speed[i0]
+        sim_t = t[i0]
+        for i in range(i0 + 1, i1 + 1):
+            while sim_t < t[i] - 1e-9:
+                body.step(P.Controls(thr[i - 1], brake[i - 1], steer[i - 1]))
+                sim_t += P.PHYSICS_DT
+        err_v.append(abs(body.state.v - speed[i1]))
+        err_yaw.append(abs((body.state.yaw - yaw[i1] + 180) % 360 - 180))
+        err_pos.append(np.hypot(body.state.x - x[i1], body.state.y - y[i1]))
+    assert len(err_v) > 80
+    assert np.median(err_v) < 0.1 and np.percentile(err_v, 90) < 0.5
+    assert np.median(err_yaw) < 1.5 and np.percentile(err_yaw, 90) < 6.0
+    assert np.median(err_pos) < 0.2 and np.percentile(err_pos, 90) < 0.6
