@@ -51,8 +51,8 @@ SAND_LUT_RGB = ((38, 26, 22), (70, 55, 48), (113, 95, 86), (146, 128, 118), (167
 ROCK_RGB = (22, 16, 13)  # boulder (rock mesh) colour, uint8 RGB (real median 19-30)
 SKY_RGB = (126, 117, 112)  # sky, uint8 RGB (real median)
 FAR_RGB = (126, 117, 112)  # rays beyond FAR_M, uint8 RGB
-SUN_AZIMUTH_DEG = 285.0  # direction the sunlight comes FROM, degrees CCW from +x (fitted)
-SUN_ELEVATION_DEG = 70.0  # sun elevation above the horizon, degrees (fitted)
+SUN_AZIMUTH_DEG = 295.0  # direction the sunlight comes FROM, degrees CCW from +x (fitted)
+SUN_ELEVATION_DEG = 60.0  # sun elevation above the horizon, degrees (fitted)
 SHADOW_FACTOR = 0.6  # brightness of cast shadow relative to sunlit, 0..1
 SLOPE_SHADE = 0.7  # how strongly faces turned from the sun darken (0 = flat look)
 SHADOW_STEP_M = 0.2  # march step of the shadow rays baked at load, m
@@ -184,10 +184,11 @@ def bake_rasters(world: World):
     lambert = np.clip((-gx * sun[0] - gy * sun[1] + sun[2]) / norm, 0.0, 1.0)
     slope_shade = (1.0 - SLOPE_SHADE) + SLOPE_SHADE * lambert / math.sin(el)
     k = SHADOW_GRID_STRIDE
-    coarse_top = np.ascontiguousarray(top[::k, ::k])
-    shadow_c = np.zeros(coarse_top.shape, np.uint8)
-    _shadow_kernel(coarse_top, cell * k, math.cos(az), math.sin(az), math.tan(el),
-                   float(top.max()), SHADOW_STEP_M, shadow_c)
+    # only the terrain casts shadows: the real frames show sunlit floor under and beside the rocks
+    coarse_ground = np.ascontiguousarray(ground[::k, ::k])
+    shadow_c = np.zeros(coarse_ground.shape, np.uint8)
+    _shadow_kernel(coarse_ground, cell * k, math.cos(az), math.sin(az), math.tan(el),
+                   float(ground.max()), SHADOW_STEP_M, shadow_c)
     shadow = cv2.resize(shadow_c.astype(np.float32), (n, n), interpolation=cv2.INTER_LINEAR)
     shadow = cv2.GaussianBlur(shadow, (5, 5), 0)
     light = slope_shade * (1.0 - (1.0 - SHADOW_FACTOR) * shadow)
