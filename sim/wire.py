@@ -45,6 +45,7 @@ OPEN_TELEMETRY_COUNT = 1  # telemetry messages sent unprompted when the socket o
 DEFAULT_FPS = 25.0  # frames per second in real-time mode
 STALL_TIMEOUT_S = 30.0  # wall s without a command before a wire mission gives up
 SERVER_START_TIMEOUT_S = 60.0  # wall s to wait for drive_rover.py to accept connections
+CLIENT_MAP_OPTION = "--save-map"  # drive_rover.py option (if it has one) to dump rover.worldmap as .npy
 HOME_STILL_S = 2.0  # s stopped within the home radius after collecting all = done (wire missions)
 PROJECT_DIR = Path(__file__).resolve().parent.parent
 
@@ -253,19 +254,50 @@ def stop_process(proc, timeout=10.0):
         proc.wait(timeout=timeout)
 
 
+def client_supports_map_dump() -> bool:
+    """True when drive_rover.py accepts CLIENT_MAP_OPTION (checked without starting it)."""
+    import contextlib
+    import io
+
+    try:
+        sys.path.insert(0, str(PROJECT_DIR))
+        import drive_rover
+
+        with contextlib.redirect_stderr(io.StringIO()):
+            drive_rover.parse_args(["--port", "1", CLIENT_MAP_OPTION, "x.npy"])
+        return True
+    except (SystemExit, Exception):
+        return False
+
+
+def _load_client_map(path):
+    import numpy as np
+
+    try:
+        m = np.load(path)
+    except (OSError, ValueError):
+        return None
+    return m if m.shape == (200, 200, 3) else None
+
+
 def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, render=True,
                      server_log=None):
     """Twin over the real protocol against drive_rover.py in a subprocess (lockstep).
 
-    The client's worldmap lives in the other process, so mapped/fidelity/located are
-    not available here (None); everything truth-based is.
+    The client's worldmap lives in the other process: it is scored only when
+    drive_rover.py can dump it (CLIENT_MAP_OPTION); otherwise mapped/fidelity/located
+    are None and only the truth-based figures are available.
     """
+    import tempfile
     from sim.mission import HOME_RADIUS_M, StuckMeter, _progress, _recorder
     from sim.twin import RoverTwin
 
     twin = RoverTwin(world, seed=seed, render=render)
     port = free_port()
-    proc = start_client_server(port, server_log)
+    map_dir = tempfile.mkdtemp(prefix="twin-wire-map-")
+    map_path = os.path.join(map_dir, "worldmap.npy")
+    extra = [CLIENT_MAP_OPTION, map_path] if client_supports_map_dump() else []
+    proc = start_client_server(port, server_log, extra)
     state = {"end": "time limit", "completed": False, "still_home_s": 0.0, "distance": 0.0}
     stuck = StuckMeter()
     traj = [(twin.truth.x, twin.truth.y)]
@@ -310,9 +342,15 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
         stop_process(proc)
         if recorder is not None:
             recorder.close()
+    worldmap = _load_client_map(map_path) if extra else None
+    import shutil
+
+    shutil.rmtree(map_dir, ignore_errors=True)  # our own temp folder
+    if extra and worldmap is None:
+        log.warning("drive_rover.py did not leave a readable worldmap at %s", map_path)
     return dict(twin=twin, stuck=stuck, traj=traj, distance=state["distance"],
                 wall=time.perf_counter() - t0, end_reason=state["end"], completed=state["completed"],
-                worldmap=None, rejected=sim.rejected)
+                worldmap=worldmap, rejected=sim.rejected)
 
 
 # ------------------------------------------------------------------------ CLI
