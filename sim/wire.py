@@ -8,7 +8,7 @@ Like the real simulator it is the websocket *client*: it opens
 upgrade), never sends ``40``, pings ``2`` every 25 s, answers ``3`` to ``2``,
 reconnects while disconnected, emits ``42["telemetry",{...}]`` (string values)
 when the socket opens and then exactly one telemetry per handled command
-(``data``, ``manual``, ``pickup``, ``fixed_turn``).
+(``data``, ``manual``, ``pickup``, ``fixed_turn``), and says ``41`` + ``1`` on quit.
 
 Modes:
 * ``lockstep`` (default): every command advances the twin one frame (0.04 s) and
@@ -204,8 +204,11 @@ class WireSimulator:
                 log.info("disconnected (%s); reconnecting", exc)
             finally:
                 try:
+                    if self._stopping() and self.ws.connected:
+                        self._send("41")  # leave the namespace, then close the Engine.IO session
+                        self._send("1")
                     self.ws.close()
-                except Exception:
+                except Exception:  # the peer may already be gone
                     pass
         log.info("wire simulator stopped: %d commands, %d rejected, %d replies",
                  self.commands, self.rejected, self.replies)
