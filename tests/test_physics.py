@@ -200,3 +200,20 @@ def test_two_second_windows_of_megalphian_drive(real_logs_dir, world_dir):
     assert np.median(err_v) < 0.1 and np.percentile(err_v, 90) < 0.5
     assert np.median(err_yaw) < 1.5 and np.percentile(err_yaw, 90) < 6.0
     assert np.median(err_pos) < 0.2 and np.percentile(err_pos, 90) < 0.6
+
+
+def test_real_world_rocks_and_wall_slopes_stop_the_rover(world_dir):
+    from sim.world import load_world
+
+    world = load_world("real")
+    sx, sy = world.start_xy
+    body = P.RoverPhysics(world, sx, sy, 270.0)  # south: the low rocks 6-8.5 m from the start
+    _run(body, P.Controls(1.0, 0.0, 0.0), 20.0)
+    assert body.state.v == 0.0 and 3.0 < sy - body.state.y < 9.0
+    y_hit = body.state.y
+    _run(body, P.Controls(-1.0, 0.0, 0.0), 3.0)
+    assert body.state.y > y_hit + 1.0  # reversed out
+    body = P.RoverPhysics(world, sx, sy, 90.0)  # north: the canyon wall slope
+    _run(body, P.Controls(1.0, 0.0, 0.0), 30.0)
+    assert world.height_at(body.state.x, body.state.y) < 1.0  # could not climb the wall
+    assert abs(body.state.v) < 1.0
