@@ -1,0 +1,56 @@
+"""Realism of the twin's camera against the real simulator frames (test_dataset).
+
+Renders every 2nd logged frame at its pose and compares starter navigable masks in the
+standard top-down warp; the floors are the issue's acceptance numbers.
+"""
+import numpy as np
+import pytest
+
+from sim import realism
+
+FRAME_STRIDE = 2  # every 2nd of the 283 frames keeps the test quick
+
+
+@pytest.fixture(scope="module")
+def figures(test_dataset_dir, world_dir):
+    from sim.render import Renderer
+    from sim.world import load_world
+
+    frames = realism.read_test_dataset(test_dataset_dir)[::FRAME_STRIDE]
+    near, whole, _ = realism.evaluate(Renderer(load_world("real")), frames)
+    return realism.summarise(near, whole)
+
+
+def test_dataset_poses_parse(test_dataset_dir):
+    frames = realism.read_test_dataset(test_dataset_dir)
+    assert len(frames) == 283
+    x, y, yaw, pitch, roll = frames[0].pose
+    assert (x, y) == pytest.approx((99.67, 85.589), abs=1e-3)
+    assert -180 < pitch <= 180 and -180 < roll <= 180
+    assert all(f.image_path.exists() for f in frames[:5])
+
+
+def test_standard_warp_masks():
+    m, fov, near = realism.standard_warp()
+    assert fov.shape == (160, 320) and near.any()
+    assert not fov[:, :5].all()  # the warped view is a wedge, not the whole image
+    assert near.sum() < fov.sum()
+
+
+def test_iou_definition():
+    region = np.ones((4, 4), bool)
+    a = np.zeros((4, 4), bool)
+    a[:2] = True
+    b = np.zeros((4, 4), bool)
+    b[1:3] = True
+    assert realism.iou(a, b, region) == pytest.approx(4 / 12)
+    assert realism.iou(a & False, b & False, region) == 1.0
+
+
+def test_near_iou_floor(figures):
+    assert figures["near_5m_mean"] >= realism.FLOOR_NEAR_MEAN, figures
+    assert figures["near_5m_p10"] >= realism.FLOOR_NEAR_P10, figures
+
+
+def test_whole_view_iou_floor(figures):
+    assert figures["whole_view_mean"] >= realism.FLOOR_WHOLE_MEAN, figures
