@@ -180,13 +180,15 @@ def bake_rasters(world: World):
     sand_cell = world.sand_cell_m
     sand = cv2.remap(world.sand_weight.astype(np.float32), xs / sand_cell - 0.5, ys / sand_cell - 0.5,
                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    # normals of the solid top and sun shading, 1 on level ground
-    gy, gx = np.gradient(cv2.GaussianBlur(top, (3, 3), 0), cell)
-    norm = np.sqrt(gx * gx + gy * gy + 1.0)
     az, el = math.radians(SUN_AZIMUTH_DEG), math.radians(SUN_ELEVATION_DEG)
     sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-    lambert = np.clip((-gx * sun[0] - gy * sun[1] + sun[2]) / norm, 0.0, 1.0)
-    slope_shade = (1.0 - SLOPE_SHADE) + SLOPE_SHADE * lambert / math.sin(el)
+
+    def sun_shade(height):
+        """Lambert shading of a height raster relative to level ground (1 on the floor)."""
+        gy, gx = np.gradient(cv2.GaussianBlur(height, (3, 3), 0), cell)
+        lam = np.clip((-gx * sun[0] - gy * sun[1] + sun[2]) / np.sqrt(gx * gx + gy * gy + 1.0), 0.0, 1.0)
+        return (1.0 - SLOPE_SHADE) + SLOPE_SHADE * lam / math.sin(el)
+
     k = SHADOW_GRID_STRIDE
     # only the terrain casts shadows: the real frames show sunlit floor under and beside the rocks
     coarse_ground = np.ascontiguousarray(ground[::k, ::k])
@@ -195,26 +197,23 @@ def bake_rasters(world: World):
                    float(ground.max()), SHADOW_STEP_M, shadow_c)
     shadow = cv2.resize(shadow_c.astype(np.float32), (n, n), interpolation=cv2.INTER_LINEAR)
     shadow = cv2.GaussianBlur(shadow, (0, 0), SHADOW_BLUR_M / cell)
-    light = slope_shade * (1.0 - (1.0 - SHADOW_FACTOR) * shadow)
+    shadow = np.where(has_gap, 0.0, shadow)  # the floor under the overhang looks sunlit in the real frames
     lut_rgb = np.array(SAND_LUT_RGB, np.float32)
     ground_rgb = np.stack([np.interp(sand, SAND_LUT_WEIGHT, lut_rgb[:, ch]) for ch in range(3)], -1)
     rng = np.random.default_rng(12345)  # fixed: the texture is part of the look, not random per run
     noise = cv2.resize(rng.uniform(-1, 1, (TEXTURE_CELLS, TEXTURE_CELLS)).astype(np.float32), (n, n),
                        interpolation=cv2.INTER_CUBIC)
     rough = 1.0 + TEXTURE_AMPLITUDE * noise * np.clip((0.7 - sand) / 0.4, 0.0, 1.0)
-    rgb = np.where(has_rock[..., None], np.array(ROCK_RGB, np.float32) * (1.0 + TEXTURE_AMPLITUDE * noise)[..., None],
-                   ground_rgb * rough[..., None])
-    colour = np.clip(rgb * light[..., None], 0, 255).astype(np.uint8)
-    # floor seen under an overhang: plain sunlit ground (the real frames show it bright)
-    ggy, ggx = np.gradient(ground, cell)
-    ground_lambert = np.clip((-ggx * sun[0] - ggy * sun[1] + sun[2]) / np.sqrt(ggx ** 2 + ggy ** 2 + 1), 0, 1)
-    ground_shade = (1.0 - SLOPE_SHADE) + SLOPE_SHADE * ground_lambert / math.sin(el)
-    under = np.clip(ground_rgb * ground_shade[..., None], 0, 255).astype(np.uint8)
-    colour_under = np.where(has_gap[..., None], under, colour)
+    # terrain colour everywhere (what a ray hitting the ground sees), bilinear in the kernel
+    light = sun_shade(ground) * (1.0 - (1.0 - SHADOW_FACTOR) * shadow)
+    colour_ground = np.clip(ground_rgb * (rough * light)[..., None], 0, 255).astype(np.uint8)
+    # rock colour (what a ray hitting a rock slab sees), nearest cell in the kernel
+    rock_rgb = np.array(ROCK_RGB, np.float32) * (1.0 + TEXTURE_AMPLITUDE * noise)[..., None]
+    colour_rock = np.clip(rock_rgb * sun_shade(top)[..., None], 0, 255).astype(np.uint8)
+    colour_rock = np.where(has_rock[..., None], colour_rock, colour_ground)
     cmax = _coarse_max(top, int(round(COARSE_CELL_M / cell)))
     return {"top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
-            "has_gap": has_gap, "colour": colour, "cmax": cmax,
-            "colour_under": colour_under,
+            "has_gap": has_gap, "colour": colour_ground, "colour_rock": colour_rock, "cmax": cmax,
             "sand": sand.astype(np.float32), "shadow": shadow.astype(np.float32),
             "has_rock": has_rock, "light": light.astype(np.float32), "sun": sun}
 
@@ -280,7 +279,7 @@ def _solid(ground, slab_lo, slab_hi, inv_cell, x, y, z):
 
 
 @njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
-def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colour_under, cmax, cell, coarse_m, rot, origin,
+def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colour_rock, cmax, cell, coarse_m, rot, origin,
                    ray_a, ray_b, far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, world_size, dist_darken, dist_scale):
     w_img, h_img = img_t.shape[0], img_t.shape[1]
@@ -312,6 +311,7 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
             s = s_start
             s_free = s
             gap_first = -1.0
+            state = 0
             hit = 0  # 0 none, 1 surface, 2 sky, 3 far
             while True:
                 if s > far_m:
@@ -390,21 +390,20 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
                 tx = fx - c0
                 ty = fy - r0
                 shade = 1.0
-                src = colour
-                rr = _nearest(n, inv_cell, y)
-                cc = _nearest(n, inv_cell, x)
-                lo_rc = slab_lo[rr, cc]
-                if -1e8 < lo_rc < 1e8:  # an overhanging slab in this cell
-                    if z < lo_rc - 0.01:
-                        src = colour_under  # the floor under it
-                    elif z < lo_rc + 0.3:
-                        shade = underside_shade
                 dist = s * math.sqrt(1.0 + k * k)
                 shade *= 1.0 - dist_darken * (1.0 - math.exp(-dist / dist_scale))
-                for ch in range(3):
-                    val = ((src[r0, c0, ch] * (1 - tx) + src[r0, c0 + 1, ch] * tx) * (1 - ty)
-                           + (src[r0 + 1, c0, ch] * (1 - tx) + src[r0 + 1, c0 + 1, ch] * tx) * ty)
-                    img_t[u, v, ch] = np.uint8(min(255.0, val * shade + 0.5))
+                if state == 1:  # terrain: bilinear ground colour
+                    for ch in range(3):
+                        val = ((colour[r0, c0, ch] * (1 - tx) + colour[r0, c0 + 1, ch] * tx) * (1 - ty)
+                               + (colour[r0 + 1, c0, ch] * (1 - tx) + colour[r0 + 1, c0 + 1, ch] * tx) * ty)
+                        img_t[u, v, ch] = np.uint8(min(255.0, val * shade + 0.5))
+                else:  # rock slab: nearest cell, darker on the underside of an overhang
+                    rr = _nearest(n, inv_cell, y)
+                    cc = _nearest(n, inv_cell, x)
+                    if -1e8 < slab_lo[rr, cc] < 1e8 and z < slab_lo[rr, cc] + 0.3:
+                        shade *= underside_shade
+                    for ch in range(3):
+                        img_t[u, v, ch] = np.uint8(min(255.0, colour_rock[rr, cc, ch] * shade + 0.5))
                 depth_t[u, v] = s / hlen
                 hit_t[u, v, 0] = x
                 hit_t[u, v, 1] = y
@@ -436,7 +435,7 @@ class Renderer:
         self._slab_lo = baked["slab_lo"]
         self._slab_hi = baked["slab_hi"]
         self.colour_map = baked["colour"]  # (2001, 2001, 3) uint8 lit albedo, [row=y, col=x]
-        self._colour_under = baked["colour_under"]
+        self._colour_rock = baked["colour_rock"]
         self._cmax = baked["cmax"]
         self.baked = baked
         self._zmax = float(self._top.max()) + 0.01
@@ -470,7 +469,7 @@ class Renderer:
         depth_t = np.empty((IMAGE_W, IMAGE_H), np.float32)
         hit_t = np.empty((IMAGE_W, IMAGE_H, 3), np.float32)
         _render_kernel(img_t, depth_t, hit_t, self._ground, self._slab_lo, self._slab_hi, self.colour_map,
-                       self._colour_under,                       self._cmax, float(self.world.rock_cell_m), COARSE_CELL_M,
+                       self._colour_rock,                       self._cmax, float(self.world.rock_cell_m), COARSE_CELL_M,
                        np.ascontiguousarray(rot), origin, self._ray_a, self._ray_b, FAR_M,
                        FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self._zmax, self._sky,
                        self._far, UNDERSIDE_SHADE, float(self.world.size_m), DIST_DARKEN,
