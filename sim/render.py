@@ -211,9 +211,14 @@ def bake_rasters(world: World):
     rock_rgb = np.array(ROCK_RGB, np.float32) * (1.0 + TEXTURE_AMPLITUDE * noise)[..., None]
     colour_rock = np.clip(rock_rgb * sun_shade(top)[..., None], 0, 255).astype(np.uint8)
     colour_rock = np.where(has_rock[..., None], colour_rock, colour_ground)
-    cmax = _coarse_max(top, int(round(COARSE_CELL_M / cell)))
+    kc = int(round(COARSE_CELL_M / cell))
+    cmax = _coarse_max(top, kc)
+    # free band under overhangs per coarse cell: above every ground, below every rock bottom
+    cground = _coarse_max(ground, kc)
+    cbottom = -_coarse_max(-slab_lo, kc)  # lowest rock bottom (-1e9 solid rock, 1e9 open sky)
     return {"top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
             "has_gap": has_gap, "colour": colour_ground, "colour_rock": colour_rock, "cmax": cmax,
+            "cground": cground, "cbottom": cbottom,
             "sand": sand.astype(np.float32), "shadow": shadow.astype(np.float32),
             "has_rock": has_rock, "light": light.astype(np.float32), "sun": sun}
 
@@ -279,7 +284,8 @@ def _solid(ground, slab_lo, slab_hi, inv_cell, x, y, z):
 
 
 @njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
-def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colour_rock, cmax, cell, coarse_m, rot, origin,
+def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colour_rock, cmax,
+                   cground, cbottom, cell, coarse_m, rot, origin,
                    ray_a, ray_b, far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, world_size, dist_darken, dist_scale):
     w_img, h_img = img_t.shape[0], img_t.shape[1]
@@ -288,8 +294,12 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
     nc = cmax.shape[0]
     ox, oy, oz = origin[0], origin[1], origin[2]
     for u in range(w_img):
-        s_start = 0.0
+        prev_s = 0.0  # where the ray below ended (hit, sky or far), horizontal m
         sky_rest = False
+        # overhang passage of the ray below: first/last distance under a slab, lowest slab bottom
+        g_first = -1.0
+        g_last = -1.0
+        g_bottom = 1e9
         for v in range(h_img - 1, -1, -1):
             if sky_rest:
                 for ch in range(3):
@@ -308,12 +318,29 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
             hx = dx / hlen
             hy = dy / hlen
             k = dz / hlen
-            s = s_start
+            # Coherence: this ray is above the one below, so it is free wherever that ray was free
+            # in open air; only where that ray passed under an overhang may this one hit earlier
+            # (the underside), and only if it can climb to the overhang's bottom.
+            jump_from = -1.0
+            jump_to = 0.0
+            if g_first >= 0.0 and (k > 0.0 or oz >= g_bottom):
+                s = g_first
+                jump_from = g_last
+                jump_to = prev_s
+                g_first = -1.0
+                g_last = -1.0
+                g_bottom = 1e9
+            else:
+                s = prev_s
             s_free = s
-            gap_first = -1.0
             state = 0
             hit = 0  # 0 none, 1 surface, 2 sky, 3 far
             while True:
+                if jump_from >= 0.0 and s > jump_from:
+                    if s < jump_to:
+                        s = jump_to
+                        s_free = s
+                    jump_from = -1.0
                 if s > far_m:
                     hit = 3
                     break
@@ -332,7 +359,9 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
                     if ri >= nc:
                         ri = nc - 1
                     cm = cmax[ri, ci]
-                    if z > cm:
+                    above = z > cm
+                    under = (not above) and cground[ri, ci] < z < cbottom[ri, ci]
+                    if above or under:
                         # distance to leave this coarse cell
                         if hx > 1e-12:
                             ex = ((ci + 1) * coarse_m - x) / hx
@@ -347,7 +376,13 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
                         else:
                             ey = 1e9
                         ds = min(ex, ey) + 1e-4
-                        if oz + (s + ds) * k > cm:
+                        z_exit = oz + (s + ds) * k
+                        if (above and z_exit > cm) or (under and cground[ri, ci] < z_exit < cbottom[ri, ci]):
+                            if under and cbottom[ri, ci] < 1e8:  # passing under an overhang
+                                if g_first < 0.0:
+                                    g_first = s
+                                g_last = max(g_last, s + ds)
+                                g_bottom = min(g_bottom, cbottom[ri, ci])
                             s_free = s + ds
                             s = s_free
                             continue
@@ -355,8 +390,11 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
                 if state == 1 or state == 3:
                     hit = 1
                     break
-                if state == 2 and gap_first < 0.0:
-                    gap_first = s
+                if state == 2:
+                    if g_first < 0.0:
+                        g_first = s
+                    g_last = max(g_last, s)
+                    g_bottom = min(g_bottom, slab_lo[_nearest(n, inv_cell, y), _nearest(n, inv_cell, x)])
                 s_free = s
                 step = step_min + step_k * s
                 s += step
@@ -408,20 +446,20 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
                 hit_t[u, v, 0] = x
                 hit_t[u, v, 1] = y
                 hit_t[u, v, 2] = z
-                s_start = s if gap_first < 0.0 else min(s, gap_first)
+                prev_s = s
             elif hit == 2:
                 for ch in range(3):
                     img_t[u, v, ch] = sky_rgb[ch]
                 depth_t[u, v] = np.inf
                 hit_t[u, v, 0] = np.nan
-                sky_rest = gap_first < 0.0
-                s_start = s if gap_first < 0.0 else gap_first
+                sky_rest = g_first < 0.0
+                prev_s = s
             else:
                 for ch in range(3):
                     img_t[u, v, ch] = far_rgb[ch]
                 depth_t[u, v] = np.inf
                 hit_t[u, v, 0] = np.nan
-                s_start = far_m if gap_first < 0.0 else gap_first
+                prev_s = far_m
 
 
 class Renderer:
@@ -437,6 +475,8 @@ class Renderer:
         self.colour_map = baked["colour"]  # (2001, 2001, 3) uint8 lit albedo, [row=y, col=x]
         self._colour_rock = baked["colour_rock"]
         self._cmax = baked["cmax"]
+        self._cground = baked["cground"]
+        self._cbottom = baked["cbottom"]
         self.baked = baked
         self._zmax = float(self._top.max()) + 0.01
         self._ray_a = ((np.arange(IMAGE_W) + 0.5 - CX) / FOCAL_PX).astype(np.float64)
@@ -469,7 +509,8 @@ class Renderer:
         depth_t = np.empty((IMAGE_W, IMAGE_H), np.float32)
         hit_t = np.empty((IMAGE_W, IMAGE_H, 3), np.float32)
         _render_kernel(img_t, depth_t, hit_t, self._ground, self._slab_lo, self._slab_hi, self.colour_map,
-                       self._colour_rock,                       self._cmax, float(self.world.rock_cell_m), COARSE_CELL_M,
+                       self._colour_rock, self._cmax, self._cground, self._cbottom,
+                       float(self.world.rock_cell_m), COARSE_CELL_M,
                        np.ascontiguousarray(rot), origin, self._ray_a, self._ray_b, FAR_M,
                        FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self._zmax, self._sky,
                        self._far, UNDERSIDE_SHADE, float(self.world.size_m), DIST_DARKEN,
