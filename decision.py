@@ -61,6 +61,9 @@ OFF_PATH_M = 2.5  # replan when the rover is further than this from its path, m
 GOAL_PROGRESS_S = 12.0  # a goal whose path length did not shrink for this long is given up, s
 GOAL_PROGRESS_M = 1.0  # ...by at least this much, m
 FRONTIER_REACHED_M = 1.5  # a frontier target this close is reached (and ignored if still frontier), m
+OWN_CELLS_RADIUS = 1  # cells around the rover's own cell always treated as drivable, cells
+EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
+EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
 BLOCKED_MEMORY_S = 120.0  # cells the rover got stuck on stay blocked this long, s
 PATH_END_SLOW_M = 3.0  # slow down over the last metres of a path to a sample or home, m
 
@@ -142,11 +145,13 @@ class NavMemory:
         self.frontier_ignored = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
         self.frontier_count = None  # reachable frontier clusters at the last explore plan
         self.explored = False
+        self.no_frontier_plans = 0  # consecutive explore plans that found no frontier
         self.second_sweep_done = False
         self.goal_best = math.inf
         self.goal_best_time = 0.0
         self.loops = explore.LoopDetector()
         self.visits = explore.VisitMap((grid.GRID_SIZE, grid.GRID_SIZE))
+        self.seen_close = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # cells looked at from close
         # samples
         self.rock_target = None  # world (x, y) of the rock being approached
         self.rock_since = 0.0  # when the current rock target was chosen, s
@@ -245,6 +250,7 @@ def _update_memory(rover, nav, s):
     if s.pos is not None:
         nav.visits.update(s.t, grid.world_to_cell(s.pos))
         nav.loops.update(s.t, s.pos, s.yaw)
+        explore.mark_seen_close(nav.seen_close, s.pos, s.yaw)
     # a pickup that just finished, or a sample count that dropped, means a collection
     finished = nav.was_picking and not s.picking_up
     dropped = (nav.last_remaining is not None and s.samples_remaining is not None
@@ -604,6 +610,15 @@ def _set_path(nav, s, kind, goal, cells):
     nav.plan_time = s.t
 
 
+def _open_around_rover(cost, cell):
+    """The rover stands here, so its own cells are drivable whatever the map says (first frames, shadows)."""
+    r = OWN_CELLS_RADIUS
+    r1, r2 = max(cell[0] - r, 0), min(cell[0] + r + 1, grid.GRID_SIZE)
+    c1, c2 = max(cell[1] - r, 0), min(cell[1] + r + 1, grid.GRID_SIZE)
+    win = cost[r1:r2, c1:c2]
+    np.minimum(win, grid.UNKNOWN_COST, out=win)
+
+
 def _blocked(nav, s):
     """Cells remembered as blocked (stuck spots), forgotten after BLOCKED_MEMORY_S."""
     return (s.t - nav.blocked_at) < BLOCKED_MEMORY_S
@@ -612,20 +627,16 @@ def _blocked(nav, s):
 def _plan_explore(rover, nav, s):
     """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
     free, obstacle, unknown = _grids(rover)
-    mask = explore.frontier_mask(free, unknown, nav.frontier_ignored)
+    mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, nav.seen_close)
     targets, cost, parent = [], None, None
     blocked = _blocked(nav, s)
     for use_blocked in (True, False):  # stale stuck memory must never hide the rest of the map
         if not use_blocked and not blocked.any():
             break
-        cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=False)
+        cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=False,
+                              soft_obstacles=True)
         cell = grid.world_to_cell(s.pos)
-        # the rover's own cell may be unmapped yet (first frames) or next to a wall
-        r1, r2 = max(cell[0] - 1, 0), min(cell[0] + 2, grid.GRID_SIZE)
-        c1, c2 = max(cell[1] - 1, 0), min(cell[1] + 2, grid.GRID_SIZE)
-        win = cost[r1:r2, c1:c2]
-        win[~np.isfinite(win) & ~obstacle[r1:r2, c1:c2]] = grid.UNKNOWN_COST
-        cost[cell] = min(cost[cell], grid.UNKNOWN_COST)
+        _open_around_rover(cost, cell)
         dist, parent = astar.distance_field(cost, cell)
         targets = explore.frontier_targets(mask, dist)
         if len(targets):
@@ -634,9 +645,12 @@ def _plan_explore(rover, nav, s):
     current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "frontier" else None
     goal = explore.choose_target(targets, s.pos, s.yaw, current)
     if goal is None:
-        nav.explored = s.t > 5.0  # an empty map on the first frames is not a finished one
+        nav.no_frontier_plans += 1
+        nav.explored = nav.no_frontier_plans >= EXPLORED_CONFIRM_PLANS and s.t > EXPLORED_MIN_TIME_S
         _set_path(nav, s, "frontier", None, [])
+        nav.plan_time = s.t - REPLAN_S + 0.5  # look again soon
         return
+    nav.no_frontier_plans = 0
     nav.explored = False
     _set_path(nav, s, "frontier", goal, astar.path_to(parent, cost.shape, goal))
 
@@ -644,7 +658,8 @@ def _plan_explore(rover, nav, s):
 def _plan_to(rover, nav, s, kind, goal):
     """A* to a fixed goal cell (rock, home), allowed through unmapped ground at a premium."""
     free, obstacle, _unknown = _grids(rover)
-    cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=True)
+    cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=True, soft_obstacles=True)
+    _open_around_rover(cost, grid.world_to_cell(s.pos))
     start = _start_cell(cost, s)
     g = goal if np.isfinite(cost[goal]) else grid.nearest_passable(cost, goal)
     cells = astar.astar(cost, start, g) if (start is not None and g is not None) else []

@@ -22,11 +22,50 @@ IGNORE_RADIUS_M = 3.0  # frontier cells within this of an abandoned target are i
 CIRCLE_WINDOW_S = 15.0  # window for circling detection, s
 CIRCLE_TURN_DEG = 400.0  # net heading change within the window that means circling, degrees
 CIRCLE_MAX_SPAN_M = 10.0  # ...while staying within a box this size, m
+SEEN_CLOSE_M = 5.0  # a mapped obstacle counts as confirmed once the camera looked at it from this close, m
+SEEN_HALF_FOV_DEG = 45.0  # ...within this half-angle of the heading, degrees
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
-def frontier_mask(free, unknown, ignored=None):
-    """Navigable cells 8-adjacent to unknown cells (minus ignored ones)."""
+def _seen_offsets():
+    r = int(np.ceil(SEEN_CLOSE_M))
+    dy, dx = np.mgrid[-r:r + 1, -r:r + 1]
+    keep = np.hypot(dx, dy) <= SEEN_CLOSE_M
+    return dy[keep].astype(np.float64), dx[keep].astype(np.float64)
+
+
+_SEEN_DY, _SEEN_DX = _seen_offsets()
+
+
+def mark_seen_close(seen, pos, yaw_deg):
+    """Mark cells the camera looks at from close range this frame (in place).
+
+    Far ground in a narrowing canyon is often mapped as obstacle (walls fill the
+    view); such cells stay 'unconfirmed' and keep pulling exploration until
+    the rover has looked at them from close.
+    """
+    if not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
+        return seen
+    cx, cy = pos[0] - 0.5, pos[1] - 0.5
+    ang = np.arctan2(_SEEN_DY + (np.round(cy) - cy), _SEEN_DX + (np.round(cx) - cx)) - np.radians(yaw_deg)
+    ang = (ang + np.pi) % (2 * np.pi) - np.pi
+    near = np.hypot(_SEEN_DX, _SEEN_DY) <= 1.5
+    keep = (np.abs(ang) <= np.radians(SEEN_HALF_FOV_DEG)) | near
+    rows = (np.round(cy) + _SEEN_DY[keep]).astype(np.int64)
+    cols = (np.round(cx) + _SEEN_DX[keep]).astype(np.int64)
+    ok = (rows >= 0) & (rows < seen.shape[0]) & (cols >= 0) & (cols < seen.shape[1])
+    seen[rows[ok], cols[ok]] = True
+    return seen
+
+
+def frontier_mask(free, unknown, ignored=None, obstacle=None, seen_close=None):
+    """Navigable cells 8-adjacent to unknown cells (minus ignored ones).
+
+    With `obstacle` and `seen_close`, obstacle cells never looked at from close
+    count as unknown.
+    """
+    if obstacle is not None and seen_close is not None:
+        unknown = unknown | (obstacle & ~seen_close)
     unk = unknown.astype(np.uint8)
     grown = cv2.dilate(unk, np.ones((3, 3), np.uint8)) > 0
     around = cv2.boxFilter(unk, cv2.CV_32F, (FRONTIER_WINDOW, FRONTIER_WINDOW), normalize=False,

@@ -15,6 +15,7 @@ FREE_COST = 1.0  # travel cost of one metre over mapped navigable ground
 UNKNOWN_COST = 4.0  # travel cost of one metre over unmapped ground (only when allowed)
 CLEARANCE_M = 2.5  # within this distance of an obstacle a cell costs extra, m
 CLEARANCE_PENALTY = 3.0  # extra cost per metre right next to an obstacle (falls linearly to 0 at CLEARANCE_M)
+OBSTACLE_COST = 12.0  # travel cost of one metre through a mapped obstacle cell when soft (maps misjudge shadows behind rocks)
 HARD_CLEARANCE_M = 1.5  # cells touching an obstacle (also diagonally) cost HARD_CLEARANCE_COST extra, m
 HARD_CLEARANCE_COST = 12.0  # extra cost per metre of a cell inside HARD_CLEARANCE_M (used only to squeeze past)
 
@@ -48,23 +49,26 @@ def obstacle_distance(obstacle):
     return cv2.distanceTransform(passable, cv2.DIST_L2, 3)
 
 
-def cost_grid(free, obstacle, blocked=None, allow_unknown=False):
+def cost_grid(free, obstacle, blocked=None, allow_unknown=False, soft_obstacles=False):
     """Per-cell travel cost (float32, inf = impassable) for the path planner.
 
     Free cells cost FREE_COST plus a clearance penalty near obstacles; unknown
-    cells are impassable unless `allow_unknown`; `blocked` (stuck memory)
-    counts as obstacle.
+    cells are impassable unless `allow_unknown`; mapped obstacles are
+    impassable, or cost OBSTACLE_COST per metre with `soft_obstacles` (the
+    camera maps the ground behind a rock as obstacle until seen from the
+    side); `blocked` (where the rover really got stuck) is always impassable.
     """
     obst = obstacle.copy()
     if blocked is not None:
         obst |= blocked
     dist = obstacle_distance(obst)
-    cost = np.full(free.shape, np.inf, np.float32)
     base = np.where(free, FREE_COST, UNKNOWN_COST if allow_unknown else np.inf).astype(np.float32)
     near = np.clip(CLEARANCE_M - dist, 0.0, None) / CLEARANCE_M * CLEARANCE_PENALTY
     cost = base + near.astype(np.float32)
     cost[dist < HARD_CLEARANCE_M] += HARD_CLEARANCE_COST
-    cost[obst] = np.inf
+    cost[obstacle] = OBSTACLE_COST + CLEARANCE_PENALTY + HARD_CLEARANCE_COST if soft_obstacles else np.inf
+    if blocked is not None:
+        cost[blocked] = np.inf
     cost[0, :] = cost[-1, :] = np.inf
     cost[:, 0] = cost[:, -1] = np.inf
     return cost
