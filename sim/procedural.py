@@ -25,8 +25,8 @@ WALL_HEIGHT_M = 12.0  # wall height far from any floor, m
 WALL_NOISE_M = 2.0  # amplitude of smooth height noise on walls, m
 WALL_NOISE_CELLS = 24  # coarse noise grid side (smaller = broader bumps), cells
 WALL_NOISE_RAMP_M = 2.0  # distance from floor over which noise fades in, m
-SAND_FADE_M = 0.6  # sand weight e-folding distance up a wall, m
-WALL_SAND = 0.15  # sand weight deep on a wall (rock texture dominates), 0..1
+SAND_FADE_M = 0.25  # sand weight e-folding distance up a wall, m
+WALL_SAND = 0.05  # sand weight deep on a wall (rock texture dominates), 0..1
 
 # canyon generator
 CANYON_MARGIN_M = 18.0  # canyons stay this far inside the world edge, m
