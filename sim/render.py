@@ -60,8 +60,8 @@ SHADOW_FACTOR = 0.6  # brightness of cast shadow relative to sunlit, 0..1
 SHADOW_BLUR_M = 1.5  # soft shadow edge (Gaussian sigma; fitted, real edges are wide penumbrae), m
 SLOPE_SHADE = 0.7  # how strongly faces turned from the sun darken (0 = flat look)
 SHADOW_STEP_M = 0.2  # march step of the shadow rays baked at load, m
-TEXTURE_AMPLITUDE = 0.25  # relative brightness noise on walls and rocks (not on sand), 0..1
-TEXTURE_CELLS = 400  # texture noise grid side over the world, cells
+TEXTURE_AMPLITUDE = 0.45  # relative brightness noise on walls and rocks (not on sand), 0..1
+TEXTURE_CELLS = (400, 1000)  # texture noise octaves: grid sides over the world, cells
 UNDERSIDE_SHADE = 0.45  # darkening of the underside of overhanging rock, 0..1
 DIST_DARKEN = 0.17  # fraction of brightness lost far away (real sand 242 -> 202 at 30 m)
 DIST_SCALE_M = 8.0  # e-folding distance of that darkening, m
@@ -201,8 +201,8 @@ def bake_rasters(world: World):
     lut_rgb = np.array(SAND_LUT_RGB, np.float32)
     ground_rgb = np.stack([np.interp(sand, SAND_LUT_WEIGHT, lut_rgb[:, ch]) for ch in range(3)], -1)
     rng = np.random.default_rng(12345)  # fixed: the texture is part of the look, not random per run
-    noise = cv2.resize(rng.uniform(-1, 1, (TEXTURE_CELLS, TEXTURE_CELLS)).astype(np.float32), (n, n),
-                       interpolation=cv2.INTER_CUBIC)
+    noise = sum(cv2.resize(rng.uniform(-1, 1, (cells, cells)).astype(np.float32), (n, n),
+                           interpolation=cv2.INTER_CUBIC) for cells in TEXTURE_CELLS) / len(TEXTURE_CELLS)
     rough = 1.0 + TEXTURE_AMPLITUDE * noise * np.clip((0.7 - sand) / 0.4, 0.0, 1.0)
     # terrain colour everywhere (what a ray hitting the ground sees), bilinear in the kernel
     light = sun_shade(ground) * (1.0 - (1.0 - SHADOW_FACTOR) * shadow)
