@@ -462,12 +462,29 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
                 prev_s = far_m
 
 
+_BAKE_CACHE = []  # [(weakref to World, baked rasters)], most recent last
+BAKE_CACHE_SIZE = 2  # worlds whose baked rasters are kept (a mission batch reuses one world)
+
+
+def _baked_for(world: World):
+    """Bake once per World object (several renderers, e.g. one per mission, share it)."""
+    import weakref
+
+    for ref, baked in _BAKE_CACHE:
+        if ref() is world:
+            return baked
+    baked = bake_rasters(world)
+    _BAKE_CACHE[:] = [(r, b) for r, b in _BAKE_CACHE if r() is not None][-(BAKE_CACHE_SIZE - 1):]
+    _BAKE_CACHE.append((weakref.ref(world), baked))
+    return baked
+
+
 class Renderer:
     """Bakes a World once; `.render(pose, samples)` draws camera frames."""
 
     def __init__(self, world: World):
         self.world = world
-        baked = bake_rasters(world)
+        baked = _baked_for(world)
         self._top = baked["top"]
         self._ground = baked["ground"]
         self._slab_lo = baked["slab_lo"]
