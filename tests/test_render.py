@@ -165,3 +165,12 @@ def test_real_world_start_view(world_dir):
     assert nav[120:].mean() > 0.9  # the start looks down a sandy valley
     assert nav[:60].mean() < 0.05  # walls and sky above
     assert importlib.import_module("sim.render").IMAGE_W == 320
+
+
+def test_explicit_root_height_raises_camera(flat_renderer):
+    """A 6th pose value is the rover root height: a higher camera sees the floor ahead farther away."""
+    flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0))
+    low = flat_renderer.last_depth[-1, 160]
+    flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0, 0.5))
+    high = flat_renderer.last_depth[-1, 160]
+    assert high > 2 * low

@@ -123,3 +123,15 @@ def test_bad_specs(tmp_path):
         load_world("no-such-kind")
     with pytest.raises(ValueError):
         load_world(str(tmp_path / "missing.png"))
+
+
+def test_surface_and_floor_queries_vectorised():
+    w = load_world("procedural:2")
+    rock = w.obstacles[0]
+    xs = np.array([w.start_xy[0], rock["x"]])
+    ys = np.array([w.start_xy[1], rock["y"]])
+    floor = w.is_floor(xs, ys)
+    assert floor.tolist() == [True, False]
+    surface = w.surface_at(xs, ys)
+    assert surface[0] == pytest.approx(0.0) and surface[1] > 0.3
+    assert w.is_solid(xs, ys, np.array([0.1, 0.1])).tolist() == [False, True]
