@@ -35,7 +35,7 @@ CAMERA_HEIGHT_M = 0.2146  # camera above flat floor, m (camera.json)
 STANDARD_SOURCE_PX = [[14, 140], [301, 140], [200, 96], [118, 96]]  # starter's calibration points
 
 
-def _open_floor_pose(world, rng_seed=0):
+def _open_floor_pose(world):
     """A pose on the floor with open floor ahead (start pose, or the most open floor cell)."""
     import cv2
 
