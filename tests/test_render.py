@@ -174,3 +174,16 @@ def test_explicit_root_height_raises_camera(flat_renderer):
     flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0, 0.5))
     high = flat_renderer.last_depth[-1, 160]
     assert high > 2 * low
+
+
+def test_calibration_grid_matches_standard_points(flat_renderer):
+    from sim import calibration
+
+    corners = calibration.grid_square_corners_px()
+    np.testing.assert_allclose(corners, calibration.STANDARD_SOURCE_PX, atol=6)  # standard fit has 0.76 deg pitch
+    pose = (100.0, 100.0, 0.0, 0.0, 0.0)
+    base = flat_renderer.render(pose)
+    grid = calibration.draw_floor_grid(base, flat_renderer.last_hit, pose)
+    dark = np.all(grid < 60, axis=2) & ~np.all(base < 60, axis=2)
+    assert dark[100:].sum() > 300  # grid lines drawn on the floor
+    assert not dark[:78].any()  # none in the sky
