@@ -56,9 +56,11 @@ def parse_seeds(text: str) -> list:
     return sorted(seeds)
 
 
-def _init_worker(world_spec):
+def _init_worker(world_spec, quiet=True):
     global _WORLD
-    logging.getLogger().setLevel(logging.WARNING)
+    if quiet:  # worker processes: only warnings, the parent shows progress
+        logging.basicConfig(level=logging.WARNING)
+        logging.getLogger().setLevel(logging.WARNING)
     import cv2
 
     cv2.setNumThreads(1)  # one worker per core: no thread oversubscription
@@ -152,12 +154,14 @@ def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIM
     results = []
     with tqdm(total=len(tasks), unit="mission", disable=not progress, desc="missions") as bar:
         if jobs == 1:
-            _init_worker(world_spec)
+            _init_worker(world_spec, quiet=False)
             for t in tasks:
                 results.append(_run_seed(t))
                 bar.update(1)
         else:
-            ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
+            # spawn, not fork: numba/OpenCV thread pools started in this process (e.g. by
+            # the procedural world) deadlock a forked child
+            ctx = mp.get_context("spawn")
             with ctx.Pool(jobs, initializer=_init_worker, initargs=(world_spec,)) as pool:
                 for r in pool.imap_unordered(_run_seed, tasks):
                     results.append(r)

@@ -86,3 +86,15 @@ def test_record_mode_writes_a_log_the_replay_reader_reads(world, tmp_path):
     first = data.frames[0]
     assert (first.x, first.y) == pytest.approx(tuple(world.start_xy), abs=1e-3)
     assert all(0.0 <= f.yaw <= 360.0 for f in data.frames)
+
+
+def test_evaluate_runs_seeds_on_two_workers(tmp_path):
+    pytest.importorskip("sim.render")
+    from sim.evaluate import evaluate
+
+    res = evaluate([0, 1], "procedural:0", jobs=2, time_limit=1.0, out=tmp_path, progress=False)
+    assert [m["seed"] for m in res["missions"]] == [0, 1]
+    assert all("mapped_pct" in m for m in res["missions"]), res["missions"]
+    for name in ("evaluation.json", "evaluation.csv", "evaluation.md"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert (tmp_path / "seed-1" / "mission.png").exists()
