@@ -5,7 +5,7 @@ import pytest
 
 from sim.mission import StuckMeter, run_mission
 
-MISSION_S = 40.0  # simulated seconds: long enough to drive and map, short for CI
+MISSION_S = 30.0  # simulated seconds: long enough to drive and map, short for CI
 
 
 @pytest.fixture(scope="module")
