@@ -45,7 +45,7 @@ STOPPED_SPEED_MPS = 0.2  # below this the rover counts as stopped, m/s
 TURN_IN_PLACE_SPEED_MPS = 0.3  # the simulator turns in place only below 0.316 m/s
 
 # --- heading / turning ----------------------------------------------------------------
-ROTATE_ENTER_DEG = 55.0  # a wanted heading further off than this is reached by turning in place, degrees
+ROTATE_ENTER_DEG = 90.0  # a wanted heading further off than this is reached by turning in place, degrees
 ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
 ROTATE_TIMEOUT_S = 6.0  # give up a turn in place after this long, s
 SLOW_TURN_DEG = 35.0  # speed falls linearly to MIN_DRIVE_SPEED at this heading error, degrees
@@ -78,7 +78,10 @@ SAMPLE_MIN_SPEED_MPS = 0.35  # creeping speed near a rock, m/s
 SAMPLE_MAX_SPEED_MPS = 1.5  # fastest approach speed, m/s
 SAMPLE_ROTATE_DEG = 35.0  # turn in place toward a rock further off than this (when slow), degrees
 SAMPLE_STEER_GAIN = 1.0  # steering command per degree of rock bearing
-SAMPLE_TIMEOUT_S = 30.0  # give up a rock after this long in sample mode, s
+SAMPLE_TIMEOUT_S = 90.0  # give up a rock after this long in sample mode, s
+SAMPLE_CLOSE_TIMEOUT_S = 30.0  # ...or after this long within SAMPLE_VISUAL_M of it, s
+SAMPLE_VISUAL_M = 3.5  # closer than this the approach steers by the camera, farther it follows a planned path, m
+SAMPLE_PATH_SPEED_MPS = 3.0  # top speed on the way to a rock, m/s
 ROCK_SKIP_S = 60.0  # a given-up rock is ignored for this long, s
 SAMPLE_VISION_MEMORY_S = 1.0  # keep steering by vision this long after the rock left the frame, s
 PICKUP_STOP_SPEED_MPS = 0.04  # request pickup only below this speed (autonomy's gate is 0.05), m/s
@@ -155,6 +158,7 @@ class NavMemory:
         # samples
         self.rock_target = None  # world (x, y) of the rock being approached
         self.rock_since = 0.0  # when the current rock target was chosen, s
+        self.rock_close_since = None  # when the rover first came within SAMPLE_VISUAL_M of it, s
         self.rock_seen_time = -math.inf  # last time the target was seen in the camera
         self.rock_bearing = 0.0  # last camera bearing of the target, rad
         self.rock_dist = math.inf  # last camera distance of the target, m
@@ -442,36 +446,36 @@ def mode_forward(rover, nav, s):
 
 
 def mode_sample(rover, nav, s):
-    """Approach the target rock: by camera bearing when visible, else along a planned path."""
-    if s.t - nav.rock_since > SAMPLE_TIMEOUT_S:
+    """Approach the target rock: along a planned path while far, by camera bearing for the last metres."""
+    dist = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1])
+    if dist <= SAMPLE_VISUAL_M and nav.rock_close_since is None:
+        nav.rock_close_since = s.t
+    close_for = s.t - nav.rock_close_since if nav.rock_close_since is not None else 0.0
+    if s.t - nav.rock_since > SAMPLE_TIMEOUT_S or close_for > SAMPLE_CLOSE_TIMEOUT_S:
         log.info("giving up rock at (%.1f, %.1f) for now", *nav.rock_target)
         nav.rock_skip.append((nav.rock_target[0], nav.rock_target[1], s.t + ROCK_SKIP_S))
         nav.rock_target = None
         nav.path_goal = None
         return Command(0.0, BRAKE_STOP, 0.0)
-    if s.t - nav.rock_seen_time <= SAMPLE_VISION_MEMORY_S:
-        alpha, dist = nav.rock_bearing, nav.rock_dist
-        speed = float(np.clip(SAMPLE_SPEED_GAIN * (dist - SAMPLE_STOP_M) + SAMPLE_MIN_SPEED_MPS,
-                              SAMPLE_MIN_SPEED_MPS, SAMPLE_MAX_SPEED_MPS))
-        if abs(math.degrees(alpha)) > SAMPLE_ROTATE_DEG and abs(s.vel) < 1.0:
-            _start_rotation(nav, s, s.yaw + math.degrees(alpha), "sample-vision")
-            return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
-        steer = float(np.clip(SAMPLE_STEER_GAIN * math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
-        thr, brk = _speed_control(s.vel, speed)
-        return Command(thr, brk, steer)
-    dist = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1])
-    if dist > PATH_END_SLOW_M:
+    if dist > SAMPLE_VISUAL_M:
+        # far: the planner knows the walls, a straight line at the rock may not
         goal = grid.world_to_cell(nav.rock_target)
         if nav.path_goal != ("rock", goal) or _needs_replan(nav, s):
             _plan_to(rover, nav, s, "rock", goal)
         if len(nav.path_xy) >= 2:
-            return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=True)
-    alpha = pursuit.bearing(s.pos, s.yaw, nav.rock_target)
-    if abs(math.degrees(alpha)) > SAMPLE_ROTATE_DEG:
-        _start_rotation(nav, s, s.yaw + math.degrees(alpha), "sample-near")
+            return _follow_path(nav, s, SAMPLE_PATH_SPEED_MPS, slow_at_end=True)
+    if s.t - nav.rock_seen_time <= SAMPLE_VISION_MEMORY_S:
+        alpha, dist = nav.rock_bearing, nav.rock_dist
+        reason = "sample-vision"
+    else:
+        alpha = pursuit.bearing(s.pos, s.yaw, nav.rock_target)
+        reason = "sample-near"
+    if abs(math.degrees(alpha)) > SAMPLE_ROTATE_DEG and abs(s.vel) < 1.0:
+        _start_rotation(nav, s, s.yaw + math.degrees(alpha), reason)
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    speed = float(np.clip(SAMPLE_SPEED_GAIN * (dist - SAMPLE_STOP_M) + SAMPLE_MIN_SPEED_MPS,
+                          SAMPLE_MIN_SPEED_MPS, SAMPLE_MAX_SPEED_MPS))
     steer = float(np.clip(SAMPLE_STEER_GAIN * math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
-    speed = float(np.clip(SAMPLE_SPEED_GAIN * dist, SAMPLE_MIN_SPEED_MPS, SAMPLE_MAX_SPEED_MPS))
     thr, brk = _speed_control(s.vel, speed)
     return Command(thr, brk, steer)
 
@@ -602,6 +606,8 @@ def _start_cell(cost, s):
 
 def _set_path(nav, s, kind, goal, cells):
     if nav.path_goal is None or nav.path_goal[0] != kind or nav.path_goal[1] != goal:
+        log.debug("new %s goal %s from (%.1f, %.1f) at t=%.1f, %d path cells", kind, goal, s.pos[0], s.pos[1],
+                  s.t, len(cells))
         _reset_goal_progress(nav, s)
         nav.loops.reset()
     nav.path_goal = (kind, goal) if goal is not None else None
@@ -698,6 +704,7 @@ def _choose_rock(rover, nav, s):
                 nav.rock_target is None or same or nearer):
             if nav.rock_target is None:
                 nav.rock_since = s.t
+                nav.rock_close_since = None
             nav.rock_target = xy
             nav.rock_seen_time = s.t
             nav.rock_bearing, nav.rock_dist = ang, dist
@@ -721,6 +728,7 @@ def _choose_rock(rover, nav, s):
     if best is not None and (best_d <= ROCK_DETOUR_M or nav.explored):
         nav.rock_target = best
         nav.rock_since = s.t
+        nav.rock_close_since = None
         nav.rock_seen_time = -math.inf
         return True
     return False

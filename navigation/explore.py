@@ -11,18 +11,19 @@ from collections import deque
 import cv2
 import numpy as np
 
-FRONTIER_MIN_CELLS = 3  # smaller frontier clusters are noise, cells
+FRONTIER_MIN_CELLS = 1  # smaller frontier clusters are noise, cells (a 2 m wide canyon has a 1-2 cell frontier)
 FRONTIER_WINDOW = 5  # window edge for counting unknown cells around a frontier cell, cells
-FRONTIER_MIN_UNKNOWN = 7  # unknown cells needed in that window (a lone unseen wall pixel is not a frontier)
-HEADING_WEIGHT_M_PER_RAD = 4.0  # extra cost per radian a target lies off the current heading, m/rad
+FRONTIER_MIN_UNKNOWN = 8  # unknown cells needed in that window (a lone unseen wall pixel is not a frontier)
+HEADING_WEIGHT_M_PER_RAD = 8.0  # extra cost per radian a target lies off the current heading, m/rad
 SIZE_BONUS_M_PER_CELL = 0.3  # cost discount per frontier cell (bigger = more to see), m
 SIZE_BONUS_CAP_CELLS = 20  # clusters larger than this get no further bonus, cells
 KEEP_TARGET_MARGIN_M = 6.0  # a new target must be this much cheaper to replace the current one, m
+KEEP_TARGET_RADIUS_M = 8.0  # a frontier cell this close to the current target continues it (frontiers recede), m
 IGNORE_RADIUS_M = 3.0  # frontier cells within this of an abandoned target are ignored, m
 CIRCLE_WINDOW_S = 15.0  # window for circling detection, s
 CIRCLE_TURN_DEG = 400.0  # net heading change within the window that means circling, degrees
 CIRCLE_MAX_SPAN_M = 10.0  # ...while staying within a box this size, m
-SEEN_CLOSE_M = 5.0  # a mapped obstacle counts as confirmed once the camera looked at it from this close, m
+SEEN_CLOSE_M = 7.0  # a mapped obstacle counts as confirmed once the camera looked at it from this close, m
 SEEN_HALF_FOV_DEG = 45.0  # ...within this half-angle of the heading, degrees
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
@@ -120,7 +121,7 @@ def choose_target(targets, pos, yaw_deg, current=None):
     best = int(np.argmin(scores))
     if current is not None:
         d = np.hypot(targets[:, 0] - current[0], targets[:, 1] - current[1])
-        near = d <= IGNORE_RADIUS_M
+        near = d <= KEEP_TARGET_RADIUS_M
         if near.any():
             cur_score = scores[near].min()
             if cur_score <= scores[best] + KEEP_TARGET_MARGIN_M:
