@@ -23,6 +23,7 @@ re-derived from the map, not from a script.
 """
 import logging
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,10 +48,14 @@ TURN_IN_PLACE_SPEED_MPS = 0.3  # the simulator turns in place only below 0.316 m
 # --- heading / turning ----------------------------------------------------------------
 ROTATE_ENTER_DEG = 90.0  # a wanted heading further off than this is reached by turning in place, degrees
 ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
+SPIN_WINDOW_S = 20.0  # window for detecting endless turning in place, s
+SPIN_STOP_FRACTION = 0.6  # ...share of it spent turning in place
+SPIN_MAX_SPAN_M = 2.0  # ...while staying within a box this size, m
 ROTATE_TIMEOUT_S = 6.0  # give up a turn in place after this long, s
 SLOW_TURN_DEG = 35.0  # speed falls linearly to MIN_DRIVE_SPEED at this heading error, degrees
 REACH_SPEED_GAIN = 1.0  # allowed speed per metre of clear corridor beyond REACH_STOP_M, 1/s
 REACH_STOP_M = 1.0  # clear corridor below which the rover will not drive forward, m
+CREEP_SPEED_MPS = 0.5  # speed along a planned path when the camera view looks blocked, m/s
 BLOCKED_TURN_DEG = 60.0  # turn this far when the way ahead is blocked, degrees
 WALL_BIAS_STD = 0.6  # fallback wall hugging: steer to mean + this x std of nav angles (left wall)
 FALLBACK_MIN_NAV_PIXELS = 50  # fallback needs this many nav pixels to drive, pixels
@@ -140,6 +145,7 @@ class NavMemory:
         # turning in place
         self.rotate_heading = None  # world yaw to turn to, degrees
         self.rotate_since = 0.0
+        self.spin_hist = deque()  # (t, turning in place?, x, y) over SPIN_WINDOW_S
         # planning
         self.path_xy = np.zeros((0, 2))
         self.path_idx = 0
@@ -184,6 +190,8 @@ def decision_step(rover):
         s = _read_inputs(rover)
         _update_memory(rover, nav, s)
         mode, cmd = _select_and_run(rover, nav, s)
+        if s.pos is not None and mode in ("stop", "forward", "sample", "home"):
+            _check_spinning(nav, s, mode)
     except Exception:  # a server must keep running: stop safely and log
         log.exception("decision_step failed; holding still")
         mode, cmd = "stop", Command(0.0, BRAKE_STOP, 0.0)
@@ -336,6 +344,35 @@ def _select_and_run(rover, nav, s):
         cmd = mode_home(rover, nav, s)
         return ("done", cmd) if nav.done else _with_rotation("home", cmd, nav)
     return _with_rotation("forward", mode_forward(rover, nav, s), nav)
+
+
+def _check_spinning(nav, s, mode):
+    """Turning in place again and again without getting anywhere: drop the goal and back off."""
+    nav.spin_hist.append((s.t, mode == "stop", s.pos[0], s.pos[1]))
+    while nav.spin_hist and s.t - nav.spin_hist[0][0] > SPIN_WINDOW_S:
+        nav.spin_hist.popleft()
+    if s.t - nav.spin_hist[0][0] < SPIN_WINDOW_S - 1.0 or nav.recovery is not None:
+        return
+    h = np.asarray(nav.spin_hist)
+    if h[:, 1].mean() < SPIN_STOP_FRACTION or max(np.ptp(h[:, 2]), np.ptp(h[:, 3])) > SPIN_MAX_SPAN_M:
+        return
+    log.info("turning in place without progress at (%.1f, %.1f) t=%.1f: dropping goal %s, backing off",
+             s.pos[0], s.pos[1], s.t, nav.path_goal)
+    _abandon_goal(nav, s)
+    nav.rotate_heading = None
+    nav.recovery = stuck.Recovery(s.t, _escape_side(nav, s), 1)
+    nav.spin_hist.clear()
+
+
+def _abandon_goal(nav, s):
+    """Give up whatever the rover is heading for (the planner will pick something else)."""
+    if nav.rock_target is not None:
+        nav.rock_skip.append((nav.rock_target[0], nav.rock_target[1], s.t + ROCK_SKIP_S))
+        nav.rock_target = None
+    elif nav.path_goal is not None and nav.path_goal[0] == "frontier" and nav.path_goal[1] is not None:
+        explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
+    nav.path_goal = None
+    nav.plan_time = -math.inf
 
 
 def _with_rotation(mode, cmd, nav):
@@ -523,13 +560,23 @@ def _start_rotation(nav, s, heading_deg, reason):
     log.debug("turn in place to %.0f deg (%s) at t=%.1f", nav.rotate_heading, reason, s.t)
 
 
-def _drive_heading(nav, s, alpha, max_speed):
-    """Drive toward rover-frame bearing `alpha` (rad), avoiding what the camera sees as blocked."""
+def _drive_heading(nav, s, alpha, max_speed, planned=False):
+    """Drive toward rover-frame bearing `alpha` (rad), avoiding what the camera sees as blocked.
+
+    With `planned` (alpha comes from a path over the map) a view that looks
+    blocked is not trusted blindly: in a narrow spur the walls fill the view
+    although the way is open, so the rover creeps on along the path and lets
+    the stuck detector judge.
+    """
     if abs(math.degrees(alpha)) > ROTATE_ENTER_DEG:
         _start_rotation(nav, s, s.yaw + math.degrees(alpha), "path-behind")
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
     reach = reactive.reach_profile(s.nav_angles, s.nav_dists, s.obs_angles, s.obs_dists)
     heading, clear = reactive.choose_heading(reach, alpha)
+    if clear < REACH_STOP_M and planned:
+        steer = pursuit.steer_for_curvature(2.0 * math.sin(alpha) / pursuit.LOOKAHEAD_MIN_M, s.vel)
+        thr, brk = _speed_control(s.vel, CREEP_SPEED_MPS)
+        return Command(thr, brk, steer)
     if clear < REACH_STOP_M:
         # nothing drivable where we want to go: turn toward the open side (or the goal side)
         side = np.sign(alpha) if abs(alpha) > math.radians(15) else (
@@ -554,7 +601,7 @@ def _follow_path(nav, s, max_speed, slow_at_end):
     speed = max_speed
     if slow_at_end:
         speed = min(speed, max(MIN_DRIVE_SPEED_MPS, 0.8 * remaining))
-    return _drive_heading(nav, s, alpha, speed)
+    return _drive_heading(nav, s, alpha, speed, planned=True)
 
 
 def _wall_follow(nav, s):
