@@ -140,3 +140,19 @@ def test_progress_monitor_and_recovery_script():
     assert rec.command(100.0) is None
     cells = stuck.blocked_cells_ahead((50.0, 50.0), 0.0)
     assert (cells[:, 1] >= 50).all() and len(cells) >= 2
+
+
+def test_unconfirmed_far_obstacles_stay_frontier_until_seen_close():
+    wm = np.zeros((200, 200, 3), np.uint8)
+    wm[95:106, 50:80, 2] = 255  # mapped floor
+    wm[95:106, 80:88, 0] = 255  # far ground mapped as obstacle (a narrowing canyon seen from afar)
+    wm[94, 50:88, 0] = wm[106, 50:88, 0] = 255
+    free, obst, unknown = grid.classify(wm)
+    seen = np.zeros((200, 200), bool)
+    explore.mark_seen_close(seen, (55.0, 100.0), 0.0)  # looked at from far away only
+    mask = explore.frontier_mask(free, unknown, None, obst, seen)
+    assert mask[100, 79], "the red band was never seen from close: it is still a frontier"
+    explore.mark_seen_close(seen, (76.0, 100.0), 0.0)  # now from close
+    assert seen[100, 82] and not seen[100, 66]
+    mask = explore.frontier_mask(free, unknown, None, obst, seen)
+    assert not mask[100, 79]
