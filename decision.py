@@ -323,6 +323,8 @@ def _select_and_run(rover, nav, s):
     """Highest-priority applicable mode wins; each mode is one function below."""
     if s.pos is None:
         return "stop", Command(0.0, BRAKE_STOP if abs(s.vel) > STOPPED_SPEED_MPS else 0.0, 0.0)
+    if nav.mode in ("sample", "pickup", "stuck"):
+        _reset_goal_progress(nav, s)  # time spent on a rock or a recovery is no stall of the frontier goal
     if s.picking_up or s.near_sample:
         nav.recovery = None
         nav.rotate_heading = None
