@@ -15,6 +15,8 @@ Modes (one handler function each):
   cells ahead are remembered as blocked so the planner avoids them;
 - sample:  approach a seen (camera) or remembered (map) sample rock slowly;
 - pickup:  stop, request the pickup once when near_sample and stopped, wait;
+- search:  map complete but samples missing: visit mapped floor far from
+  the trail (pockets at the arms' tips hide samples);
 - home:    plan back to the start and stop there;
 - done:    parked at home with everything collected (or time is up).
 
@@ -156,6 +158,8 @@ class NavMemory:
         self.explored = False
         self.no_frontier_plans = 0  # consecutive explore plans that found no frontier
         self.second_sweep_done = False
+        self.search_left = True  # sample search still has places to visit
+        self.search_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places the search has visited
         self.goal_best = math.inf
         self.goal_best_time = 0.0
         self.loops = explore.LoopDetector()
@@ -190,7 +194,7 @@ def decision_step(rover):
         s = _read_inputs(rover)
         _update_memory(rover, nav, s)
         mode, cmd = _select_and_run(rover, nav, s)
-        if s.pos is not None and mode in ("stop", "forward", "sample", "home"):
+        if s.pos is not None and mode in ("stop", "forward", "sample", "home", "search"):
             _check_spinning(nav, s, mode)
     except Exception:  # a server must keep running: stop safely and log
         log.exception("decision_step failed; holding still")
@@ -342,6 +346,10 @@ def _select_and_run(rover, nav, s):
             return "stop", cmd
     if _choose_rock(rover, nav, s):
         return _with_rotation("sample", mode_sample(rover, nav, s), nav)
+    if _should_search(nav, s):
+        cmd = mode_search(rover, nav, s)
+        if cmd is not None:
+            return _with_rotation("search", cmd, nav)
     if _should_go_home(rover, nav, s):
         cmd = mode_home(rover, nav, s)
         return ("done", cmd) if nav.done else _with_rotation("home", cmd, nav)
@@ -482,6 +490,19 @@ def mode_forward(rover, nav, s):
             nav.plan_time = -math.inf
         return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
     return _wall_follow(nav, s)
+
+
+def mode_search(rover, nav, s):
+    """Map complete, samples missing: visit mapped floor far from the trail; None when nothing is left."""
+    if nav.path_goal is None or nav.path_goal[0] != "search" or _needs_replan(nav, s):
+        _plan_search(rover, nav, s)
+    if not nav.search_left or nav.path_goal is None or len(nav.path_xy) < 2:
+        return None
+    goal_xy = grid.cell_to_world(*nav.path_goal[1])
+    if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M or _goal_stalled(nav, s):
+        explore.ignore_disc(nav.search_done, nav.path_goal[1], explore.SEARCH_MIN_AWAY_M)
+        nav.plan_time = -math.inf
+    return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
 
 
 def mode_sample(rover, nav, s):
@@ -710,6 +731,21 @@ def _plan_explore(rover, nav, s):
     _set_path(nav, s, "frontier", goal, astar.path_to(parent, cost.shape, goal))
 
 
+def _plan_search(rover, nav, s):
+    free, obstacle, _unknown = _grids(rover)
+    cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=False, soft_obstacles=True)
+    cell = grid.world_to_cell(s.pos)
+    _open_around_rover(cost, cell)
+    dist, parent = astar.distance_field(cost, cell)
+    goal = explore.search_target(free, nav.visits.visited(), nav.search_done, dist)
+    if goal is None:
+        nav.search_left = False
+        log.info("sample search finished at t=%.1f", s.t)
+        _set_path(nav, s, "search", None, [])
+        return
+    _set_path(nav, s, "search", goal, astar.path_to(parent, cost.shape, goal))
+
+
 def _plan_to(rover, nav, s, kind, goal):
     """A* to a fixed goal cell (rock, home), allowed through unmapped ground at a premium."""
     free, obstacle, _unknown = _grids(rover)
@@ -781,6 +817,18 @@ def _choose_rock(rover, nav, s):
         nav.rock_seen_time = -math.inf
         return True
     return False
+
+
+def _should_search(nav, s):
+    """After the map is complete, with samples still missing and time left, search the far corners."""
+    if not (nav.explored and nav.second_sweep_done and nav.search_left):
+        return False
+    if s.samples_remaining is None or s.samples_remaining <= 0 or nav.home is None:
+        return False
+    if nav.path_goal is not None and nav.path_goal[0] == "home":
+        return False
+    home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
+    return s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS <= HOME_BY_S
 
 
 def _should_go_home(rover, nav, s):

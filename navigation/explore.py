@@ -25,6 +25,7 @@ CIRCLE_TURN_DEG = 400.0  # net heading change within the window that means circl
 CIRCLE_MAX_SPAN_M = 10.0  # ...while staying within a box this size, m
 SEEN_CLOSE_M = 7.0  # a mapped obstacle counts as confirmed once the camera looked at it from this close, m
 SEEN_HALF_FOV_DEG = 45.0  # ...within this half-angle of the heading, degrees
+SEARCH_MIN_AWAY_M = 4.0  # sample search visits mapped floor at least this far from the trail, m
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
@@ -134,6 +135,20 @@ def ignore_disc(ignored, cell, radius=IGNORE_RADIUS_M):
     """Mark a disc of cells around `cell` as ignored frontier (in place)."""
     cv2.circle(ignored.view(np.uint8), (int(cell[1]), int(cell[0])), int(np.ceil(radius)), 1, -1)
     return ignored
+
+
+def search_target(free, visited, done, dist):
+    """Nearest (by path) mapped floor cell far from everywhere the rover has been, or None.
+
+    Used when the map is complete but samples are missing: a sample hidden in
+    a pocket (behind a rock at an arm's tip) is only seen from close by.
+    """
+    away = cv2.distanceTransform((~visited).astype(np.uint8), cv2.DIST_L2, 3)
+    cand = free & (away >= SEARCH_MIN_AWAY_M) & ~done & np.isfinite(dist)
+    if not cand.any():
+        return None
+    k = int(np.argmin(np.where(cand, dist, np.inf)))
+    return divmod(k, free.shape[1])
 
 
 def map_complete(targets):

@@ -68,7 +68,7 @@ def test_degenerate_inputs_never_nan(field, value):
         r.total_time = 10.0 + k * DT if field != "total_time" else value
         decision.decision_step(r)
         assert_sane(r)
-    assert r.mode in ("forward", "stop", "stuck", "sample", "pickup", "home", "done")
+    assert r.mode in ("forward", "stop", "stuck", "sample", "pickup", "search", "home", "done")
 
 
 def test_empty_view_turns_in_place_not_forward():
