@@ -16,7 +16,7 @@ stall it.  Recording (optional folder argument) writes a simulator-format
 anything.
 
 Usage: ``python drive_rover.py [image_folder] [--host 127.0.0.1] [--port 4567]
-[--ground-truth PATH|none] [--log-level INFO]``
+[--ground-truth PATH|none] [--save-map PATH.npy] [--log-level INFO]``
 """
 from __future__ import annotations
 
@@ -46,6 +46,7 @@ PING_TIMEOUT_S = 60  # Engine.IO ping timeout, s
 RECORD_QUEUE_FRAMES = 256  # frames buffered for the recorder thread before dropping, frames
 RECORD_JOIN_TIMEOUT_S = 10.0  # time allowed to flush the recorder at exit, s
 LIB_LOG_LEVEL = logging.WARNING  # socketio/engineio loggers (INFO logs every packet)
+SAVE_MAP_EVERY_FRAMES = 100  # --save-map: telemetry frames between worldmap dumps (plus one at exit), frames
 
 
 # --------------------------------------------------------------------------- versions
@@ -142,8 +143,37 @@ class Recorder:
                  self.folder, self.dropped)
 
 
+class MapSaver:
+    """``--save-map``: dumps ``rover.worldmap`` as .npy every few frames and at exit,
+    so a mission scorer (or a user) can read the map of a live run; each write is
+    atomic (temp file + rename), so a reader never sees half a file."""
+
+    def __init__(self, path, every: int = SAVE_MAP_EVERY_FRAMES):
+        self.path = Path(path).expanduser()
+        self.every = max(1, int(every))
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._failed = False
+
+    def maybe_save(self, rover) -> None:
+        if rover.frame_count % self.every == 0:
+            self.save(rover)
+
+    def save(self, rover) -> None:
+        import numpy as np
+
+        tmp = self.path.with_name(f".{self.path.name}.tmp")
+        try:
+            with open(tmp, "wb") as fh:
+                np.save(fh, np.asarray(rover.worldmap))
+            os.replace(tmp, self.path)
+        except OSError as exc:  # a full disk must not stop the rover
+            if not self._failed:
+                log.warning("cannot write the worldmap to %s: %s", self.path, exc)
+            self._failed = True
+
+
 # --------------------------------------------------------------------------- server
-def build_server(client, recorder: Optional[Recorder] = None):
+def build_server(client, recorder: Optional[Recorder] = None, map_saver: Optional[MapSaver] = None):
     """The Socket.IO server and WSGI app around ``client`` (an AutonomyClient)."""
     import flask
     import socketio
@@ -194,6 +224,8 @@ def build_server(client, recorder: Optional[Recorder] = None):
             event, payload = "data", command_payload(stop["throttle"], stop["brake"], stop["steer"])
         if recorder is not None and event != "manual":
             recorder.submit(client.last_telemetry)
+        if map_saver is not None and event != "manual":
+            map_saver.maybe_save(client.rover)
         sio.emit(event, payload, room=sid)
 
     app = flask.Flask(__name__)
@@ -238,6 +270,9 @@ def parse_args(argv=None):
                    help="port to bind (default %(default)s, the simulator's; 0 = any free port)")
     p.add_argument("--ground-truth", default=None,
                    help="map_bw.png for the Mapped/Fidelity inset (default: the shared one if present; 'none' to disable)")
+    p.add_argument("--save-map", default=None, metavar="PATH.npy",
+                   help="write the worldmap (200x200x3 uint8, [y, x]) here every "
+                        f"{SAVE_MAP_EVERY_FRAMES} frames and at exit")
     p.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ... (default %(default)s)")
     return p.parse_args(argv)
 
@@ -262,7 +297,8 @@ def main(argv=None) -> int:
     recorder = Recorder(args.image_folder) if args.image_folder else None
     if recorder is not None:
         log.info("recording into %s", recorder.folder)
-    _, wsgi_app = build_server(client, recorder)
+    map_saver = MapSaver(args.save_map) if args.save_map else None
+    _, wsgi_app = build_server(client, recorder, map_saver)
     host, port = listener.getsockname()[:2]
     log.info("listening on %s:%d; now start the simulator and choose Autonomous mode", host, port)
 
@@ -273,6 +309,8 @@ def main(argv=None) -> int:
                  client.rover.frame_count, client.bad_frames, client.step_errors)
         if recorder is not None:
             recorder.close()
+        if map_saver is not None:
+            map_saver.save(client.rover)
         logging.shutdown()
         os._exit(0)
 

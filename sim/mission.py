@@ -8,7 +8,7 @@ the twin's `sim_time`).  `--wire`: `drive_rover.py` runs as a subprocess on a fr
 port and the twin talks to it over the real Socket.IO wire protocol, exactly like
 the Unity program (lockstep).
 
-Writes `<out>/mission.json` (atomic) and `<out>/mission.png` (worldmap vs truth,
+Writes `<out>/mission.json`, `<out>/worldmap.npy` (all atomic) and `<out>/mission.png` (worldmap vs truth,
 trajectory, samples, start).  Mapped/fidelity/located use
 `evaluation.metrics.score_map` on the client's worldmap; collected, returned
 home, time and stuck figures come from the twin's ground truth.
@@ -75,6 +75,16 @@ def write_png_atomic(path, bgr) -> None:
         raise ValueError(f"cannot encode PNG for {path}")
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_bytes(buf.tobytes())
+    os.replace(tmp, path)
+
+
+def write_npy_atomic(path, array) -> None:
+    """Save an array for later analysis (`np.load`), via a temp file + os.replace."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as fh:
+        np.save(fh, np.asarray(array))
     os.replace(tmp, path)
 
 
@@ -331,6 +341,9 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
                             [(st[1], st[2]) for st in result.stuck_stretches])
         write_png_atomic(out / "mission.png", img)
         result.files = {"json": str(out / "mission.json"), "png": str(out / "mission.png")}
+        if summary.get("worldmap") is not None:
+            write_npy_atomic(out / "worldmap.npy", summary["worldmap"])
+            result.files["worldmap"] = str(out / "worldmap.npy")
         if video:
             result.files["video"] = str(video)
         if record:

@@ -105,7 +105,8 @@ def test_lockstep_against_real_client_server(tmp_path):
     sim = WireSimulator(twin, port=port, mode="lockstep", should_stop=lambda: twin.frame >= FRAMES)
     runner = threading.Thread(target=sim.run, daemon=True)
     runner.start()
-    proc = start_client_server(port, tmp_path / "drive_rover.log")
+    map_path = tmp_path / "maps" / "worldmap.npy"
+    proc = start_client_server(port, tmp_path / "drive_rover.log", ["--save-map", str(map_path)])
     try:
         assert wait_for_port(port, proc), (tmp_path / "drive_rover.log").read_text()[-2000:]
         runner.join(timeout=240)
@@ -124,6 +125,11 @@ def test_lockstep_against_real_client_server(tmp_path):
     start = np.array(twin.world.start_xy)
     moved = np.hypot(twin.truth.x - start[0], twin.truth.y - start[1])
     assert moved > 0.5 or abs(twin.truth.yaw - twin.initial_yaw) > 5
+    # --save-map: the client's worldmap is left behind, whole, for the scorer
+    worldmap = np.load(map_path)
+    assert worldmap.shape == (200, 200, 3) and worldmap.dtype == np.uint8
+    assert (worldmap[:, :, 2] > 0).sum() > 50
+    assert not list(map_path.parent.glob(".*.tmp"))
 
 
 def test_realtime_mode_advances_without_commands():
