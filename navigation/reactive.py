@@ -30,28 +30,26 @@ def _bin_index(angles):
     return idx, ok, n
 
 
+def _binned(angles, dists):
+    """(bin index, distance) of the finite pixels beyond NEAR_IGNORE_M that fall inside the profile."""
+    angles = np.asarray(angles, dtype=np.float64).ravel()
+    dists = np.asarray(dists, dtype=np.float64).ravel()
+    m = min(angles.size, dists.size)
+    angles, dists = angles[:m], dists[:m]
+    good = np.isfinite(angles) & np.isfinite(dists) & (dists > NEAR_IGNORE_M)
+    idx, ok, n = _bin_index(angles[good])
+    return idx[ok], dists[good][ok], n
+
+
 def reach_profile(nav_angles, nav_dists, obs_angles=None, obs_dists=None):
     """Per-bin free distance (m) in the current frame; 0 where no ground is seen."""
-    nav_angles = np.asarray(nav_angles, dtype=np.float64).ravel()
-    nav_dists = np.asarray(nav_dists, dtype=np.float64).ravel()
-    m = min(nav_angles.size, nav_dists.size)
-    nav_angles, nav_dists = nav_angles[:m], nav_dists[:m]
-    good = np.isfinite(nav_angles) & np.isfinite(nav_dists) & (nav_dists > NEAR_IGNORE_M)
-    idx, ok, n = _bin_index(nav_angles[good])
-    d = nav_dists[good][ok]
-    idx = idx[ok]
+    idx, d, n = _binned(nav_angles, nav_dists)
     counts = np.bincount(idx, minlength=n)
     reach = np.zeros(n)
     np.maximum.at(reach, idx, d)
     reach[counts < MIN_PIXELS] = 0.0
     if obs_angles is not None and obs_dists is not None:
-        oa = np.asarray(obs_angles, dtype=np.float64).ravel()
-        od = np.asarray(obs_dists, dtype=np.float64).ravel()
-        k = min(oa.size, od.size)
-        oa, od = oa[:k], od[:k]
-        g = np.isfinite(oa) & np.isfinite(od) & (od > NEAR_IGNORE_M)
-        oidx, ook, _ = _bin_index(oa[g])
-        oidx, od = oidx[ook], od[g][ook]
+        oidx, od, _ = _binned(obs_angles, obs_dists)
         ocount = np.bincount(oidx, minlength=n)
         omin = np.full(n, np.inf)
         np.minimum.at(omin, oidx, od)

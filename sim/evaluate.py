@@ -21,6 +21,7 @@ import statistics
 import time
 from pathlib import Path
 
+from sim.cli import parse_with_logging
 from sim.mission import TIME_LIMIT_S
 
 log = logging.getLogger(__name__)
@@ -184,10 +185,7 @@ def main(argv=None) -> int:
     p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, help="simulated seconds per mission")
     p.add_argument("--out", default=DEFAULT_OUT)
     p.add_argument("--no-progress", action="store_true")
-    p.add_argument("--log-level", default="INFO")
-    a = p.parse_args(argv)
-    logging.basicConfig(level=getattr(logging, a.log_level.upper(), logging.INFO),
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    a = parse_with_logging(p, argv)
     try:
         seeds = parse_seeds(a.seeds)
     except ValueError as exc:

@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.cli import parse_with_logging
+
 log = logging.getLogger(__name__)
 
 TIME_LIMIT_S = 900.0  # simulated seconds before a mission is stopped
@@ -373,10 +375,7 @@ def main(argv=None) -> int:
     p.add_argument("--record", default=None, help="record a simulator-format log (robot_log.csv + IMG)")
     p.add_argument("--wire", action="store_true", help="run drive_rover.py and talk the real wire protocol")
     p.add_argument("--no-progress", action="store_true")
-    p.add_argument("--log-level", default="INFO")
-    a = p.parse_args(argv)
-    logging.basicConfig(level=getattr(logging, a.log_level.upper(), logging.INFO),
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    a = parse_with_logging(p, argv)
     if a.time_limit <= 0 or not math.isfinite(a.time_limit):
         p.error("--time-limit must be a positive number of seconds")
     try:

@@ -35,6 +35,8 @@ import threading
 import time
 from pathlib import Path
 
+from sim.cli import parse_with_logging
+
 log = logging.getLogger(__name__)
 
 URL_TEMPLATE = "ws://{host}:{port}/socket.io/?EIO=4&transport=websocket"  # the simulator's URL
@@ -369,10 +371,7 @@ def main(argv=None) -> int:
     p.add_argument("--record", default=None, help="record a simulator-format log into this folder")
     p.add_argument("--open-telemetry", type=int, default=OPEN_TELEMETRY_COUNT,
                    help="telemetry messages sent when the socket opens (the real sim: ~2)")
-    p.add_argument("--log-level", default="INFO")
-    a = p.parse_args(argv)
-    logging.basicConfig(level=getattr(logging, a.log_level.upper(), logging.INFO),
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    a = parse_with_logging(p, argv)
     from sim.mission import _recorder
     from sim.twin import RoverTwin
     from sim.world import load_world
