@@ -148,6 +148,7 @@ class NavMemory:
         self.rotate_heading = None  # world yaw to turn to, degrees
         self.rotate_since = 0.0
         self.spin_hist = deque()  # (t, turning in place?, x, y) over SPIN_WINDOW_S
+        self.spin_events = []  # (t, x, y) of every spin detection, for alternating the escape
         # planning
         self.path_xy = np.zeros((0, 2))
         self.path_idx = 0
@@ -357,7 +358,8 @@ def _select_and_run(rover, nav, s):
 
 
 def _check_spinning(nav, s, mode):
-    """Turning in place again and again without getting anywhere: drop the goal and back off."""
+    """Turning in place again and again without getting anywhere: drop the goal and back off
+    (or, when that already failed here, drive ahead)."""
     nav.spin_hist.append((s.t, mode == "stop", s.pos[0], s.pos[1]))
     while nav.spin_hist and s.t - nav.spin_hist[0][0] > SPIN_WINDOW_S:
         nav.spin_hist.popleft()
@@ -366,11 +368,14 @@ def _check_spinning(nav, s, mode):
     h = np.asarray(nav.spin_hist)
     if h[:, 1].mean() < SPIN_STOP_FRACTION or max(np.ptp(h[:, 2]), np.ptp(h[:, 3])) > SPIN_MAX_SPAN_M:
         return
-    log.info("turning in place without progress at (%.1f, %.1f) t=%.1f: dropping goal %s, backing off",
-             s.pos[0], s.pos[1], s.t, nav.path_goal)
+    repeat = stuck.count_recent_nearby(nav.spin_events, s.t, s.pos)
+    nav.spin_events.append((s.t, s.pos[0], s.pos[1]))
+    ahead = repeat % 2 == 1  # backing off did not free it last time here: pull away forward
+    log.info("turning in place without progress at (%.1f, %.1f) t=%.1f: dropping goal %s, %s",
+             s.pos[0], s.pos[1], s.t, nav.path_goal, "driving ahead" if ahead else "backing off")
     _abandon_goal(nav, s)
     nav.rotate_heading = None
-    nav.recovery = stuck.Recovery(s.t, _escape_side(nav, s), 1)
+    nav.recovery = stuck.Recovery(s.t, _escape_side(nav, s), 1, ahead=ahead)
     nav.spin_hist.clear()
 
 

@@ -19,6 +19,7 @@ ESCALATE_BACK_S = 0.6  # extra reverse time per repeated stuck at the same place
 ESCALATE_RADIUS_M = 3.0  # stuck events within this distance count as the same place, m
 ESCALATE_WINDOW_S = 40.0  # ...and within this time, s
 MAX_ESCALATION = 4  # cap on the repeat count used for escalation
+AHEAD_THROTTLE = 0.6  # forward escape throttle (used when reversing cannot free the rover)
 
 
 class ProgressMonitor:
@@ -45,15 +46,22 @@ class ProgressMonitor:
 
 
 class Recovery:
-    """Scripted escape: reverse (steering so the nose swings toward turn_sign), stop, turn in place."""
+    """Scripted escape: reverse (steering so the nose swings toward turn_sign), stop, turn in place.
 
-    def __init__(self, t0, turn_sign, repeat=0):
+    With ``ahead`` the first phase drives forward at full lock instead: a rover
+    wedged with its tail on a rock can neither reverse nor turn in place, but
+    can still pull away nose first.
+    """
+
+    def __init__(self, t0, turn_sign, repeat=0, ahead=False):
         self.t0 = float(t0)
         self.turn_sign = 1.0 if turn_sign >= 0 else -1.0
         back = BACK_OFF_S + ESCALATE_BACK_S * min(repeat, MAX_ESCALATION)
         turn = TURN_S * (1.0 + 0.25 * min(repeat, MAX_ESCALATION))
+        first = (("ahead", back, AHEAD_THROTTLE, 0.0, 15.0 * self.turn_sign) if ahead
+                 else ("back", back, BACK_OFF_THROTTLE, 0.0, -15.0 * self.turn_sign))
         self.phases = [
-            ("back", back, BACK_OFF_THROTTLE, 0.0, -15.0 * self.turn_sign),
+            first,
             ("settle", SETTLE_S, 0.0, SETTLE_BRAKE, 0.0),
             ("turn", turn, 0.0, 0.0, 15.0 * self.turn_sign),
         ]

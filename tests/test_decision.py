@@ -219,3 +219,20 @@ def test_goes_home_when_done_and_parks():
     assert r.mode == "done"
     assert r.brake > 0 and r.throttle == 0
     assert r.mission_complete
+
+
+def test_spinning_twice_at_one_place_backs_off_then_drives_ahead():
+    """A rover wedged tail-first can neither reverse nor turn in place: the second try pulls away forward."""
+    nav = decision.NavMemory()
+    empty = np.zeros(0)
+    phases = []
+    t = 0.0
+    for _ in range(2):
+        while nav.recovery is None:
+            s = decision.Inputs(t, (81.5, 75.6), 43.7, 0.0, empty, empty, empty, empty, empty, empty,
+                                False, False, 1)
+            decision._check_spinning(nav, s, "stop")
+            t += DT
+        phases.append(nav.recovery.command(t)[0])
+        nav.recovery = None
+    assert phases == ["back", "ahead"]

@@ -156,3 +156,10 @@ def test_unconfirmed_far_obstacles_stay_frontier_until_seen_close():
     assert seen[100, 82] and not seen[100, 66]
     mask = explore.frontier_mask(free, unknown, None, obst, seen)
     assert not mask[100, 79]
+
+
+def test_forward_escape_drives_ahead_at_full_lock():
+    rec = stuck.Recovery(0.0, turn_sign=-1.0, ahead=True)
+    name, throttle, brake, steer = rec.command(0.1)
+    assert name == "ahead" and throttle > 0 and brake == 0 and steer < 0
+    assert [rec.command(t)[0] for t in np.arange(0, 3.0, 0.1) if rec.command(t)][-1] == "turn"
