@@ -59,11 +59,11 @@ DECISION_RANGE_M = 12.0  # nav/obstacle pixels handed to decision reach this far
 
 # --- mapping ---
 WORLD_SIZE = 200  # world map edge, cells (1 cell = 1 m)
-MAP_RANGE_M = 7.0  # only ground within this distance votes, m
+MAP_RANGE_M = 9.0  # only ground within this distance votes, m
 MAP_RANGE_FALLOFF = 0.5  # vote weight at MAP_RANGE_M relative to 1 at the rover (linear), 0..1
 NAV_VOTE_WEIGHT = 1.0  # weight of one navigable top-down cell vote
 OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
-NAV_MAJORITY = 0.4  # a map cell shows navigable when nav share of votes exceeds this, 0..1
+NAV_MAJORITY = 0.2  # a map cell shows navigable when nav share of votes exceeds this, 0..1 (edge cells are mixed)
 MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 

@@ -124,3 +124,12 @@ def test_runner_without_ground_truth_reports_nan(tmp_path):
     assert np.isnan(result.mapped_pct)
     assert result.as_dict()["mapped_pct"] is None  # JSON-safe
     assert rover.worldmap[:, :, 2].any()
+
+
+def test_megalphian_mapping_target(real_logs_dir, ground_truth):
+    """Issue target on the long real drive: >= 88 % mapped at >= 95 % fidelity, all six rock sites."""
+    result, rover, traj = replay(read_log(real_logs_dir / "megalphian"), ground_truth, progress=False)
+    assert result.frames_used == 6150
+    assert result.mapped_pct >= 88.0
+    assert result.fidelity_pct >= 95.0
+    assert len(rover.rocks_world) == 6
