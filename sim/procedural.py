@@ -25,7 +25,7 @@ WALL_HEIGHT_M = 12.0  # wall height far from any floor, m
 WALL_NOISE_M = 2.0  # amplitude of smooth height noise on walls, m
 WALL_NOISE_CELLS = 24  # coarse noise grid side (smaller = broader bumps), cells
 WALL_NOISE_RAMP_M = 2.0  # distance from floor over which noise fades in, m
-SAND_FADE_M = 0.25  # sand weight e-folding distance up a wall, m
+SAND_EDGE_M = 0.6  # sand weight ramps from full to WALL_SAND across this band centred on the floor edge, m
 WALL_SAND = 0.05  # sand weight deep on a wall (rock texture dominates), 0..1
 
 # canyon generator
@@ -78,12 +78,16 @@ def extrude_floor(floor_vertices: np.ndarray, rng: np.random.Generator):
     height += WALL_NOISE_M * ramp * _smooth_noise(rng, height.shape, WALL_NOISE_CELLS)
     base = np.minimum(dist_m * WALL_SLOPE, WALL_HEIGHT_M)
     height = np.where(floor_vertices, 0.0, np.maximum(height, 0.5 * base))  # noise never sinks a wall
-    # sand texels: weight from the distance of the texel centre to the floor
+    # sand texels: weight from the signed distance of the texel centre to the floor edge.
+    # Texels are 0.39 m and walls rise 2.5 m per metre, so sand must be gone by the edge:
+    # any sand on the wall foot is seen below the horizon and projects onto the wall as floor.
+    inside_m = cv2.distanceTransform(floor_vertices.astype(np.uint8), cv2.DIST_L2, 5).astype(np.float64)
+    signed_m = dist_m - inside_m * TERRAIN_CELL_M  # > 0 on walls, < 0 inside the floor
     centres = (np.arange(SAND_TEXELS) + 0.5) * SAND_CELL_M / TERRAIN_CELL_M
     cc, rr = np.meshgrid(centres, centres)
-    d_tex = cv2.remap(dist_m.astype(np.float32), cc.astype(np.float32), rr.astype(np.float32),
+    d_tex = cv2.remap(signed_m.astype(np.float32), cc.astype(np.float32), rr.astype(np.float32),
                       cv2.INTER_LINEAR)
-    sand = WALL_SAND + (1.0 - WALL_SAND) * np.exp(-np.maximum(d_tex - 0.2, 0.0) / SAND_FADE_M)
+    sand = WALL_SAND + (1.0 - WALL_SAND) * np.clip(0.5 - d_tex / SAND_EDGE_M, 0.0, 1.0)
     return height.astype(np.float32), sand.astype(np.float32)
 
 
