@@ -25,7 +25,7 @@ WALL_HEIGHT_M = 12.0  # wall height far from any floor, m
 WALL_NOISE_M = 2.0  # amplitude of smooth height noise on walls, m
 WALL_NOISE_CELLS = 24  # coarse noise grid side (smaller = broader bumps), cells
 WALL_NOISE_RAMP_M = 2.0  # distance from floor over which noise fades in, m
-SAND_EDGE_M = 0.6  # sand weight ramps from full to WALL_SAND across this band centred on the floor edge, m
+SAND_EDGE_M = 0.6  # sand weight ramps from full to WALL_SAND across this band of floor next to the wall, m
 WALL_SAND = 0.05  # sand weight deep on a wall (rock texture dominates), 0..1
 
 # canyon generator
@@ -87,7 +87,7 @@ def extrude_floor(floor_vertices: np.ndarray, rng: np.random.Generator):
     cc, rr = np.meshgrid(centres, centres)
     d_tex = cv2.remap(signed_m.astype(np.float32), cc.astype(np.float32), rr.astype(np.float32),
                       cv2.INTER_LINEAR)
-    sand = WALL_SAND + (1.0 - WALL_SAND) * np.clip(0.5 - d_tex / SAND_EDGE_M, 0.0, 1.0)
+    sand = WALL_SAND + (1.0 - WALL_SAND) * np.clip(-d_tex / SAND_EDGE_M, 0.0, 1.0)
     return height.astype(np.float32), sand.astype(np.float32)
 
 
