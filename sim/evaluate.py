@@ -167,6 +167,8 @@ def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIM
                 for r in pool.imap_unordered(_run_seed, tasks):
                     results.append(r)
                     bar.update(1)
+                pool.close()  # let workers exit cleanly (terminate() leaks their semaphores)
+                pool.join()
     results.sort(key=lambda r: r["seed"])
     summary = summarise([r for r in results if "mapped_pct" in r])
     world_name = next((r.get("world") for r in results if r.get("world")), world_spec)

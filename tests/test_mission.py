@@ -89,10 +89,17 @@ def test_record_mode_writes_a_log_the_replay_reader_reads(world, tmp_path):
 
 
 def test_evaluate_runs_seeds_on_two_workers(tmp_path):
+    """The CLI as users run it: two worker processes, every output, and a clean exit."""
     pytest.importorskip("sim.render")
-    from sim.evaluate import evaluate
+    import subprocess
+    import sys
 
-    res = evaluate([0, 1], "procedural:0", jobs=2, time_limit=1.0, out=tmp_path, progress=False)
+    proc = subprocess.run([sys.executable, "-m", "sim.evaluate", "--seeds", "0-1", "--world", "procedural:0",
+                           "--jobs", "2", "--time-limit", "1", "--out", str(tmp_path), "--no-progress"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "leaked" not in proc.stderr, "worker processes were killed instead of joined"
+    res = json.loads((tmp_path / "evaluation.json").read_text())
     assert [m["seed"] for m in res["missions"]] == [0, 1]
     assert all("mapped_pct" in m for m in res["missions"]), res["missions"]
     for name in ("evaluation.json", "evaluation.csv", "evaluation.md"):
