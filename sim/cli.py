@@ -11,3 +11,10 @@ def parse_with_logging(parser: argparse.ArgumentParser, argv=None) -> argparse.N
     args = parser.parse_args(argv)
     logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.INFO), format=LOG_FORMAT)
     return args
+
+
+def add_shadows_option(parser: argparse.ArgumentParser):
+    """--shadows on|off: the simulator's graphics quality decides whether terrain casts shadows."""
+    parser.add_argument("--shadows", choices=("on", "off"), default="on",
+                        help="terrain cast shadows as at the simulator's Simple..Fantastic quality (on, "
+                             "as in test_dataset) or none as at Fastest/Fast (off, as in the megalphian drive)")

@@ -21,7 +21,7 @@ import statistics
 import time
 from pathlib import Path
 
-from sim.cli import parse_with_logging
+from sim.cli import add_shadows_option, parse_with_logging
 from sim.mission import TIME_LIMIT_S
 
 log = logging.getLogger(__name__)
@@ -57,7 +57,7 @@ def parse_seeds(text: str) -> list:
     return sorted(seeds)
 
 
-def _init_worker(world_spec, quiet=True):
+def _init_worker(world_spec, quiet=True, shadows=True):
     global _WORLD
     if quiet:  # worker processes: only warnings, the parent shows progress
         logging.basicConfig(level=logging.WARNING)
@@ -65,9 +65,9 @@ def _init_worker(world_spec, quiet=True):
     import cv2
 
     cv2.setNumThreads(1)  # one worker per core: no thread oversubscription
-    from sim.world import load_world
+    from sim.world import load_world, with_shadows
 
-    _WORLD = load_world(world_spec)
+    _WORLD = with_shadows(load_world(world_spec), shadows)
 
 
 def _run_seed(args):
@@ -145,7 +145,7 @@ def write_outputs(out: Path, results, summary, meta):
 
 
 def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIMIT_S, out=DEFAULT_OUT,
-             progress=True) -> dict:
+             progress=True, shadows=True) -> dict:
     from tqdm import tqdm
 
     out = Path(out)
@@ -155,7 +155,7 @@ def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIM
     results = []
     with tqdm(total=len(tasks), unit="mission", disable=not progress, desc="missions") as bar:
         if jobs == 1:
-            _init_worker(world_spec, quiet=False)
+            _init_worker(world_spec, quiet=False, shadows=shadows)
             for t in tasks:
                 results.append(_run_seed(t))
                 bar.update(1)
@@ -163,7 +163,7 @@ def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIM
             # spawn, not fork: numba/OpenCV thread pools started in this process (e.g. by
             # the procedural world) deadlock a forked child
             ctx = mp.get_context("spawn")
-            with ctx.Pool(jobs, initializer=_init_worker, initargs=(world_spec,)) as pool:
+            with ctx.Pool(jobs, initializer=_init_worker, initargs=(world_spec, True, shadows)) as pool:
                 for r in pool.imap_unordered(_run_seed, tasks):
                     results.append(r)
                     bar.update(1)
@@ -173,7 +173,7 @@ def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIM
     summary = summarise([r for r in results if "mapped_pct" in r])
     world_name = next((r.get("world") for r in results if r.get("world")), world_spec)
     meta = {"world": world_name, "seeds": f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0]),
-            "count": len(seeds), "jobs": jobs, "time_limit_s": time_limit,
+            "count": len(seeds), "shadows": "on" if shadows else "off", "jobs": jobs, "time_limit_s": time_limit,
             "wall_s": round(time.perf_counter() - t0, 1)}
     md = write_outputs(out, results, summary, meta)
     return {"meta": meta, "summary": summary, "missions": results, "markdown": md}
@@ -186,6 +186,7 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=DEFAULT_JOBS, help="worker processes")
     p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, help="simulated seconds per mission")
     p.add_argument("--out", default=DEFAULT_OUT)
+    add_shadows_option(p)
     p.add_argument("--no-progress", action="store_true")
     a = parse_with_logging(p, argv)
     try:
@@ -201,7 +202,8 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
-    res = evaluate(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress)
+    res = evaluate(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress,
+                   shadows=a.shadows == "on")
     log.info("\n%s", res["markdown"])
     log.info("wrote %s/evaluation.{json,csv,md} in %.0f s", a.out, res["meta"]["wall_s"])
     return 0

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.cli import parse_with_logging
+from sim.cli import add_shadows_option, parse_with_logging
 
 log = logging.getLogger(__name__)
 
@@ -374,12 +374,16 @@ def main(argv=None) -> int:
     p.add_argument("--video", default=None, help="write camera + map video (mp4)")
     p.add_argument("--record", default=None, help="record a simulator-format log (robot_log.csv + IMG)")
     p.add_argument("--wire", action="store_true", help="run drive_rover.py and talk the real wire protocol")
+    add_shadows_option(p)
     p.add_argument("--no-progress", action="store_true")
     a = parse_with_logging(p, argv)
     if a.time_limit <= 0 or not math.isfinite(a.time_limit):
         p.error("--time-limit must be a positive number of seconds")
     try:
-        r = run_mission(a.seed, a.world, a.time_limit, a.out, a.video, a.record, a.wire,
+        from sim.world import load_world, with_shadows
+
+        world = with_shadows(load_world(a.world), a.shadows == "on")
+        r = run_mission(a.seed, world, a.time_limit, a.out, a.video, a.record, a.wire,
                         progress=not a.no_progress)
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)

@@ -1,7 +1,7 @@
 """The rover camera of the twin: pose -> the 320x160 RGB frame the simulator would show.
 
-How: everything static (terrain, rocks, sand texture, sun shading, baked shadows) is
-baked once into 0.1 m rasters (solid top, overhang gap, colour). A frame is a
+How: everything static (terrain, rocks, sand texture, sun shading, baked shadows, unless the world
+has cast_shadows off) is baked once into 0.1 m rasters (solid top, overhang gap, colour). A frame is a
 column-wise heightfield raymarch (numba): each image column is walked from the
 bottom row up, every ray resuming at the horizontal distance where the ray below
 hit (exact for a level camera, a few-pixel approximation under pitch/roll), with
@@ -189,15 +189,18 @@ def bake_rasters(world: World):
         lam = np.clip((-gx * sun[0] - gy * sun[1] + sun[2]) / np.sqrt(gx * gx + gy * gy + 1.0), 0.0, 1.0)
         return (1.0 - SLOPE_SHADE) + SLOPE_SHADE * lam / math.sin(el)
 
-    k = SHADOW_GRID_STRIDE
-    # only the terrain casts shadows: the real frames show sunlit floor under and beside the rocks
-    coarse_ground = np.ascontiguousarray(ground[::k, ::k])
-    shadow_c = np.zeros(coarse_ground.shape, np.uint8)
-    _shadow_kernel(coarse_ground, cell * k, math.cos(az), math.sin(az), math.tan(el),
-                   float(ground.max()), SHADOW_STEP_M, shadow_c)
-    shadow = cv2.resize(shadow_c.astype(np.float32), (n, n), interpolation=cv2.INTER_LINEAR)
-    shadow = cv2.GaussianBlur(shadow, (0, 0), SHADOW_BLUR_M / cell)
-    shadow = np.where(has_gap, 0.0, shadow)  # the floor under the overhang looks sunlit in the real frames
+    if getattr(world, "cast_shadows", True):
+        k = SHADOW_GRID_STRIDE
+        # only the terrain casts shadows: the real frames show sunlit floor under and beside the rocks
+        coarse_ground = np.ascontiguousarray(ground[::k, ::k])
+        shadow_c = np.zeros(coarse_ground.shape, np.uint8)
+        _shadow_kernel(coarse_ground, cell * k, math.cos(az), math.sin(az), math.tan(el),
+                       float(ground.max()), SHADOW_STEP_M, shadow_c)
+        shadow = cv2.resize(shadow_c.astype(np.float32), (n, n), interpolation=cv2.INTER_LINEAR)
+        shadow = cv2.GaussianBlur(shadow, (0, 0), SHADOW_BLUR_M / cell)
+        shadow = np.where(has_gap, 0.0, shadow)  # the floor under the overhang looks sunlit in the real frames
+    else:  # the simulator's Fastest/Fast quality levels render no shadows
+        shadow = np.zeros((n, n), np.float32)
     lut_rgb = np.array(SAND_LUT_RGB, np.float32)
     ground_rgb = np.stack([np.interp(sand, SAND_LUT_WEIGHT, lut_rgb[:, ch]) for ch in range(3)], -1)
     rng = np.random.default_rng(12345)  # fixed: the texture is part of the look, not random per run

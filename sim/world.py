@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +54,7 @@ class World:
     rock_cell_m: float = ROCK_CELL_M
     size_m: float = WORLD_SIZE_M
     obstacles: list = field(default_factory=list)  # optional dicts {name, x, y, radius_m, ...}
+    cast_shadows: bool = True  # False: the simulator's Fastest/Fast graphics quality, no cast shadows
 
     # ------------------------------------------------------------------ geometry
     def clamp_xy(self, x, y):
@@ -221,6 +222,17 @@ def load_world(spec: str = "default") -> World:
 
         return world_from_map_png(path)
     raise ValueError(f"unknown world spec {spec!r}: use 'real', 'procedural:SEED' or a PNG path")
+
+
+def with_shadows(world: World, on: bool) -> World:
+    """The same scene with cast shadows on or off (the simulator's graphics-quality choice).
+
+    Real recordings differ: test_dataset shows terrain shadows, the 6,150-frame megalphian
+    drive shows none (its floor where the twin casts shadow is as bright as sunlit floor).
+    """
+    if world.cast_shadows == bool(on):
+        return world
+    return replace(world, cast_shadows=bool(on))
 
 
 def real_world_available() -> bool:

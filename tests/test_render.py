@@ -187,3 +187,21 @@ def test_calibration_grid_matches_standard_points(flat_renderer):
     dark = np.all(grid < 60, axis=2) & ~np.all(base < 60, axis=2)
     assert dark[100:].sum() > 300  # grid lines drawn on the floor
     assert not dark[:78].any()  # none in the sky
+
+
+def test_shadows_off_lights_the_shadowed_floor():
+    """--shadows off (Fastest/Fast quality) brightens exactly the floor the terrain shadows."""
+    from sim.render import SHADOW_FACTOR, _baked_for
+    from sim.world import with_shadows
+
+    on = load_world("procedural:0")
+    off = with_shadows(on, False)
+    assert off is not on and not off.cast_shadows and on.cast_shadows
+    assert with_shadows(on, True) is on  # no copy when nothing changes
+    lit_on, lit_off = _baked_for(on)["light"], _baked_for(off)["light"]
+    shadowed = _baked_for(on)["shadow"] > 0.9
+    assert shadowed.any(), "the procedural canyon walls should shadow some floor"
+    assert not _baked_for(off)["shadow"].any()
+    ratio = lit_on[shadowed] / lit_off[shadowed]
+    assert np.median(ratio) == pytest.approx(SHADOW_FACTOR, abs=0.05)
+    assert np.array_equal(lit_on[~(_baked_for(on)["shadow"] > 0)], lit_off[~(_baked_for(on)["shadow"] > 0)])
