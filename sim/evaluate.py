@@ -138,7 +138,7 @@ def write_outputs(out: Path, results, summary, meta):
     for r in results:
         w.writerow({c: r.get(c) for c in COLUMNS})
     _write_text_atomic(out / "evaluation.csv", buf.getvalue())
-    md = (f"# Twin evaluation: world {meta['world']}, seeds {meta['seeds']}, "
+    md = (f"# Twin evaluation: world {meta['world']}, shadows {meta.get('shadows', 'on')}, seeds {meta['seeds']}, "
           f"time limit {meta['time_limit_s']:.0f} s\n\n" + markdown_table(results, summary))
     _write_text_atomic(out / "evaluation.md", md)
     return md

@@ -155,6 +155,7 @@ class MissionResult:
     rejected_commands: int
     stuck_stretches: list = field(default_factory=list)  # [t, x, y, duration_s] >= STUCK_REPORT_MIN_S
     files: dict = field(default_factory=dict)
+    shadows: bool = True  # the twin rendered terrain cast shadows (--shadows on)
 
     def as_dict(self):
         return {k: _nan_to_none(v) for k, v in asdict(self).items()}
@@ -313,7 +314,8 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
         frames=tr.frame, distance_m=round(summary["distance"], 2),
         final_distance_to_start_m=round(home, 2), wall_s=round(wall, 2),
         frames_per_s=round(tr.frame / wall, 1) if wall > 0 else float("nan"),
-        rejected_commands=summary["rejected"], stuck_stretches=list(summary["stuck"].stretches))
+        rejected_commands=summary["rejected"], stuck_stretches=list(summary["stuck"].stretches),
+        shadows=bool(getattr(world, "cast_shadows", True)))
 
 
 def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,
@@ -358,7 +360,8 @@ def format_result(r: dict) -> str:
     def f(v, fmt="{:.1f}%"):
         return "n/a" if v is None else fmt.format(v)
 
-    return (f"seed {r['seed']} [{r['world']}, {r['mode']}]: mapped {f(r['mapped_pct'])}, "
+    shadows = "" if r.get("shadows", True) else ", no shadows"
+    return (f"seed {r['seed']} [{r['world']}, {r['mode']}{shadows}]: mapped {f(r['mapped_pct'])}, "
             f"fidelity {f(r['fidelity_pct'])}, located {f(r['located'], '{}')}/{r['samples']}, "
             f"collected {r['collected']}/{r['samples']}, home {'yes' if r['returned_home'] else 'no'}, "
             f"time {r['time_s']:.0f} s ({r['end_reason']}), stuck {r['stuck_time_s']:.0f} s "

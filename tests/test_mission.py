@@ -32,6 +32,7 @@ def test_short_mission_writes_metrics_and_png(world, tmp_path):
     assert data["rejected_commands"] == 0
     assert data["longest_stuck_s"] <= data["stuck_time_s"] <= data["time_s"]
     assert isinstance(data["stuck_stretches"], list)
+    assert data["shadows"] is True  # the default twin renders cast shadows
 
 
 def test_stuck_meter_counts_throttle_without_motion():
@@ -95,13 +96,16 @@ def test_evaluate_runs_seeds_on_two_workers(tmp_path):
     import sys
 
     proc = subprocess.run([sys.executable, "-m", "sim.evaluate", "--seeds", "0-1", "--world", "procedural:0",
-                           "--jobs", "2", "--time-limit", "1", "--out", str(tmp_path), "--no-progress"],
+                           "--jobs", "2", "--time-limit", "1", "--out", str(tmp_path), "--no-progress",
+                           "--shadows", "off"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "leaked" not in proc.stderr, "worker processes were killed instead of joined"
     res = json.loads((tmp_path / "evaluation.json").read_text())
     assert [m["seed"] for m in res["missions"]] == [0, 1]
     assert all("mapped_pct" in m for m in res["missions"]), res["missions"]
+    assert res["meta"]["shadows"] == "off" and not any(m["shadows"] for m in res["missions"])
+    assert "shadows off" in (tmp_path / "evaluation.md").read_text()
     for name in ("evaluation.json", "evaluation.csv", "evaluation.md"):
         assert (tmp_path / name).stat().st_size > 0
     assert (tmp_path / "seed-1" / "mission.png").exists()
