@@ -527,7 +527,7 @@ class Renderer:
         # column-major buffers: the kernel walks columns, so it writes contiguous memory
         img_t = np.empty((IMAGE_W, IMAGE_H, 3), np.uint8)
         depth_t = np.empty((IMAGE_W, IMAGE_H), np.float32)
-        hit_t = np.empty((IMAGE_W, IMAGE_H, 3), np.float32)
+        hit_t = np.full((IMAGE_W, IMAGE_H, 3), np.nan, np.float32)  # sky stays nan in all three (the kernel writes x only)
         _render_kernel(img_t, depth_t, hit_t, self._ground, self._slab_lo, self._slab_hi, self.colour_map,
                        self._colour_rock, self._cmax, self._cground, self._cbottom,
                        float(self.world.rock_cell_m), COARSE_CELL_M,
@@ -541,7 +541,7 @@ class Renderer:
         for sample in samples:
             self._draw_sample(img, depth, origin, rot, sample)
         self.last_depth = depth  # distance along the ray / |forward|, inf for sky
-        self.last_hit = hitpos  # world (x, y, z) of each pixel's surface, x = nan for sky
+        self.last_hit = hitpos  # world (x, y, z) of each pixel's surface, all nan for sky
         return img
 
     # ------------------------------------------------------------------ samples

@@ -205,3 +205,14 @@ def test_shadows_off_lights_the_shadowed_floor():
     ratio = lit_on[shadowed] / lit_off[shadowed]
     assert np.median(ratio) == pytest.approx(SHADOW_FACTOR, abs=0.05)
     assert np.array_equal(lit_on[~(_baked_for(on)["shadow"] > 0)], lit_off[~(_baked_for(on)["shadow"] > 0)])
+
+
+def test_last_hit_is_nan_in_every_coordinate_for_sky(flat_renderer):
+    """Sky pixels must not leak uninitialised memory into y and z (it made grid drawing warn)."""
+    for _ in range(3):
+        flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0))
+        hit = flat_renderer.last_hit
+        sky = np.isnan(hit[..., 0])
+        assert sky[:70].all() and not sky[100:].any()
+        assert np.isnan(hit[sky]).all()
+        assert np.isfinite(hit[~sky]).all()
