@@ -19,7 +19,7 @@ from pathlib import Path
 import perception
 import shared_data
 from evaluation.metrics import load_ground_truth, score_map
-from replay.log_format import read_log
+from replay.log_format import LOG_NAME, read_log
 from replay.runner import FALLBACK_FRAME_PERIOD_S, apply_frame, decode_frame, signed_angle
 from rover_state import RoverState
 from sim.cli import add_shadows_option, parse_with_logging
@@ -48,24 +48,27 @@ class MapRealism:
 
 
 def find_log(name_or_path) -> Path:
-    """A robot_log.csv from a real-logs folder name, a folder or a csv path."""
+    """The robot_log.csv of a real-logs folder name, a log folder or a csv path (read_log's rule)."""
     p = Path(name_or_path)
     if not p.exists():
         p = shared_data.real_logs_dir() / str(name_or_path)
     if p.is_dir():
-        found = sorted(p.rglob("*.csv"))
-        if not found:
-            raise FileNotFoundError(f"no robot_log.csv under {p}")
-        p = found[0]
+        p = p / LOG_NAME
+        if not p.exists():
+            raise FileNotFoundError(f"no {LOG_NAME} in {p.parent}")
     if not p.exists():
         raise FileNotFoundError(f"log not found: {name_or_path} (looked in {shared_data.real_logs_dir()})")
     return p
 
 
-def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = False):
-    """Replay real and twin frames of one log; returns (MapRealism, real worldmap, twin worldmap)."""
+def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = False, truth=None):
+    """Replay real and twin frames of one log; returns (MapRealism, real worldmap, twin worldmap).
+
+    truth: map_bw as load_ground_truth gives it (read from ../shared when None).
+    """
     data = read_log(log_path)
-    truth = load_ground_truth(shared_data.ground_truth_map_path())
+    if truth is None:
+        truth = load_ground_truth(shared_data.ground_truth_map_path())
     renderer = Renderer(world)
     real_rover, twin_rover = RoverState(), RoverState()
     frames = data.frames[:: max(1, int(stride))]
@@ -112,14 +115,14 @@ def main(argv=None) -> int:
     try:
         log_path = find_log(a.log)
         world = with_shadows(load_real_world(), a.shadows == "on")
-        result, real_map, twin_map = compare(log_path, world, a.stride, progress=True)
+        truth = load_ground_truth(shared_data.ground_truth_map_path())
+        result, real_map, twin_map = compare(log_path, world, a.stride, progress=True, truth=truth)
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
     out = Path(a.out)
     from replay.outputs import map_image, write_json, write_png
 
-    truth = load_ground_truth(shared_data.ground_truth_map_path())
     write_json(out / "metrics.json", {**asdict(result), "log": str(log_path), "stride": a.stride})
     for name, worldmap, mapped, fidelity in (("real", real_map, result.real_mapped_pct, result.real_fidelity_pct),
                                              ("twin", twin_map, result.twin_mapped_pct, result.twin_fidelity_pct)):
