@@ -315,7 +315,7 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
         final_distance_to_start_m=round(home, 2), wall_s=round(wall, 2),
         frames_per_s=round(tr.frame / wall, 1) if wall > 0 else float("nan"),
         rejected_commands=summary["rejected"], stuck_stretches=list(summary["stuck"].stretches),
-        shadows=bool(getattr(world, "cast_shadows", True)))
+        shadows=bool(world.cast_shadows))
 
 
 def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,

@@ -189,7 +189,7 @@ def bake_rasters(world: World):
         lam = np.clip((-gx * sun[0] - gy * sun[1] + sun[2]) / np.sqrt(gx * gx + gy * gy + 1.0), 0.0, 1.0)
         return (1.0 - SLOPE_SHADE) + SLOPE_SHADE * lam / math.sin(el)
 
-    if getattr(world, "cast_shadows", True):
+    if world.cast_shadows:
         k = SHADOW_GRID_STRIDE
         # only the terrain casts shadows: the real frames show sunlit floor under and beside the rocks
         coarse_ground = np.ascontiguousarray(ground[::k, ::k])

@@ -199,12 +199,14 @@ def test_shadows_off_lights_the_shadowed_floor():
     assert off is not on and not off.cast_shadows and on.cast_shadows
     assert with_shadows(on, True) is on  # no copy when nothing changes
     lit_on, lit_off = _baked_for(on)["light"], _baked_for(off)["light"]
-    shadowed = _baked_for(on)["shadow"] > 0.9
+    shadow_on = _baked_for(on)["shadow"]
+    shadowed = shadow_on > 0.9
     assert shadowed.any(), "the procedural canyon walls should shadow some floor"
     assert not _baked_for(off)["shadow"].any()
     ratio = lit_on[shadowed] / lit_off[shadowed]
     assert np.median(ratio) == pytest.approx(SHADOW_FACTOR, abs=0.05)
-    assert np.array_equal(lit_on[~(_baked_for(on)["shadow"] > 0)], lit_off[~(_baked_for(on)["shadow"] > 0)])
+    sunlit = ~(shadow_on > 0)
+    assert np.array_equal(lit_on[sunlit], lit_off[sunlit])
 
 
 def test_last_hit_is_nan_in_every_coordinate_for_sky(flat_renderer):
