@@ -217,7 +217,8 @@ def parse_number(text: str, decimal_comma: bool = False) -> Optional[float]:
     return v if math.isfinite(v) else None
 
 
-def _resolve_log_path(path) -> Path:
+def resolve_log_path(path) -> Path:
+    """robot_log.csv itself, or the one inside a log folder; LogFormatError when there is none."""
     p = Path(path).expanduser()
     if p.is_dir():
         p = p / LOG_NAME
@@ -292,7 +293,7 @@ def read_log(path, require_images: bool = True) -> LogData:
     tried as a fallback.  Raises LogFormatError when the file is not a log or has
     no usable rows.
     """
-    p = _resolve_log_path(path)
+    p = resolve_log_path(path)
     text = _read_text(p)
     lines = [ln for ln in text.split("\n") if ln.strip()]
     if not lines:

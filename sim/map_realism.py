@@ -19,7 +19,7 @@ from pathlib import Path
 import perception
 import shared_data
 from evaluation.metrics import load_ground_truth, score_map
-from replay.log_format import LOG_NAME, read_log
+from replay.log_format import LogFormatError, read_log, resolve_log_path
 from replay.runner import FALLBACK_FRAME_PERIOD_S, apply_frame, decode_frame, signed_angle
 from rover_state import RoverState
 from sim.cli import add_shadows_option, parse_with_logging
@@ -52,13 +52,10 @@ def find_log(name_or_path) -> Path:
     p = Path(name_or_path)
     if not p.exists():
         p = shared_data.real_logs_dir() / str(name_or_path)
-    if p.is_dir():
-        p = p / LOG_NAME
-        if not p.exists():
-            raise FileNotFoundError(f"no {LOG_NAME} in {p.parent}")
-    if not p.exists():
-        raise FileNotFoundError(f"log not found: {name_or_path} (looked in {shared_data.real_logs_dir()})")
-    return p
+    try:
+        return resolve_log_path(p)
+    except LogFormatError as exc:
+        raise FileNotFoundError(f"{exc} (real logs are looked up in {shared_data.real_logs_dir()})") from None
 
 
 def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = False, truth=None):
