@@ -54,6 +54,8 @@ SPIN_WINDOW_S = 20.0  # window for detecting endless turning in place, s
 SPIN_STOP_FRACTION = 0.6  # ...share of it spent turning in place
 SPIN_MAX_SPAN_M = 2.0  # ...while staying within a box this size, m
 ROTATE_TIMEOUT_S = 6.0  # give up a turn in place after this long, s
+ROTATE_BLOCKED_S = 2.0  # turning in place that has not changed the heading for this long means wedged, s
+ROTATE_BLOCKED_DEG = 5.0  # ...has not changed it by at least this much, degrees
 SLOW_TURN_DEG = 50.0  # speed falls linearly to MIN_DRIVE_SPEED at this heading error, degrees
 REACH_SPEED_GAIN = 1.0  # allowed speed per metre of clear corridor beyond REACH_STOP_M, 1/s
 REACH_STOP_M = 1.0  # clear corridor below which the rover will not drive forward, m
@@ -79,6 +81,7 @@ ROCK_MIN_PIXELS = 3  # rock pixels needed to trust a rock in the current frame
 ROCK_CHASE_M = 10.0  # chase a rock seen in the camera closer than this, m
 ROCK_DETOUR_M = 25.0  # go for a remembered rock closer than this (straight line) while exploring, m
 ROCK_SAME_M = 2.0  # rock positions closer than this are the same rock, m
+COLLECTED_CLEAR_M = 3.0  # remembered rocks this close to a collected one are echoes of it, m (samples lie >= 5 m apart)
 SAMPLE_STOP_M = 0.9  # rock distance (rover origin) where approach speed reaches its floor, m
 SAMPLE_SPEED_GAIN = 0.5  # approach speed per metre of rock distance, 1/s
 SAMPLE_MIN_SPEED_MPS = 0.35  # creeping speed near a rock, m/s
@@ -149,6 +152,7 @@ class NavMemory:
         self.rotate_since = 0.0
         self.spin_hist = deque()  # (t, turning in place?, x, y) over SPIN_WINDOW_S
         self.spin_events = []  # (t, x, y) of every spin detection, for alternating the escape
+        self.turn_ref = None  # (t, yaw) since when turning in place has not changed the heading
         # planning
         self.path_xy = np.zeros((0, 2))
         self.path_idx = 0
@@ -334,7 +338,7 @@ def _select_and_run(rover, nav, s):
         nav.recovery = None
         nav.rotate_heading = None
         return "pickup", mode_pickup(nav, s)
-    if nav.recovery is not None or _check_stuck(nav, s):
+    if nav.recovery is not None or _check_stuck(nav, s) or _check_turn_blocked(nav, s):
         cmd = mode_stuck(nav, s)
         if cmd is not None:
             return "stuck", cmd
@@ -399,23 +403,51 @@ def _check_stuck(nav, s):
     driving = nav.last_cmd.throttle > 0.05 and nav.last_cmd.brake == 0.0
     if not nav.progress.update(s.t, s.pos, driving):
         return False
-    repeat = stuck.count_recent_nearby(nav.stuck_events, s.t, s.pos)
-    nav.stuck_events.append((s.t, s.pos[0], s.pos[1]))
     if nav.stuck_since is None:
         nav.stuck_since = s.t - stuck.STUCK_WINDOW_S
+    _begin_recovery(nav, s, "stuck")
+    for r, c in stuck.blocked_cells_ahead(s.pos, s.yaw):
+        if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
+            nav.blocked_at[r, c] = s.t
+    return True
+
+
+def _check_turn_blocked(nav, s):
+    """Turning in place while wedged (a rock at a corner) leaves the heading unchanged: escape at once
+    instead of waiting for the turn to time out again and again."""
+    cmd = nav.last_cmd
+    if nav.rotate_heading is None or cmd.throttle != 0.0 or cmd.brake != 0.0 or cmd.steer == 0.0:
+        nav.turn_ref = None
+        return False
+    if nav.turn_ref is None or abs(_heading_diff(s.yaw, nav.turn_ref[1])) >= ROTATE_BLOCKED_DEG:
+        nav.turn_ref = (s.t, s.yaw)
+        return False
+    if s.t - nav.turn_ref[0] < ROTATE_BLOCKED_S:
+        return False
+    nav.turn_ref = None
+    if nav.stuck_since is None:
+        nav.stuck_since = s.t - ROTATE_BLOCKED_S
+    _begin_recovery(nav, s, "turn blocked")
+    return True
+
+
+def _begin_recovery(nav, s, why):
+    """Start an escape; a repeat at the same place escapes to the other side and for longer."""
+    repeat = stuck.count_recent_nearby(nav.stuck_events, s.t, s.pos)
+    nav.stuck_events.append((s.t, s.pos[0], s.pos[1]))
     sign = _escape_side(nav, s)
     if repeat % 2 == 1:
         sign = -sign
     nav.recovery = stuck.Recovery(s.t, sign, repeat)
-    for r, c in stuck.blocked_cells_ahead(s.pos, s.yaw):
-        if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
-            nav.blocked_at[r, c] = s.t
     nav.progress.reset()
     nav.rotate_heading = None
     nav.plan_time = -math.inf  # replan around the blocked cells
-    log.info("stuck at (%.1f, %.1f) t=%.1f, repeat %d, escaping %s", s.pos[0], s.pos[1], s.t, repeat,
+    log.info("%s at (%.1f, %.1f) t=%.1f, repeat %d, escaping %s", why, s.pos[0], s.pos[1], s.t, repeat,
              "left" if sign > 0 else "right")
-    return True
+
+
+def _heading_diff(a, b):
+    return (a - b + 180.0) % 360.0 - 180.0
 
 
 def _escape_side(nav, s):
@@ -452,7 +484,7 @@ def mode_stuck(nav, s):
     """Run the scripted recovery; None when it has finished (the caller picks the next mode)."""
     if nav.recovery is None:
         return None
-    out = nav.recovery.command(s.t)
+    out = nav.recovery.command(s.t, (s.pos[0], s.pos[1], s.yaw))
     if out is None:
         nav.recovery = None
         nav.progress.reset()
@@ -768,7 +800,7 @@ def _plan_to(rover, nav, s, kind, goal):
 
 def _rock_is_known_done(nav, xy, t):
     for c in nav.collected:
-        if math.hypot(xy[0] - c[0], xy[1] - c[1]) < ROCK_SAME_M:
+        if math.hypot(xy[0] - c[0], xy[1] - c[1]) < COLLECTED_CLEAR_M:
             return True
     for x, y, until in nav.rock_skip:
         if t < until and math.hypot(xy[0] - x, xy[1] - y) < ROCK_SAME_M:

@@ -195,6 +195,19 @@ def test_after_pickup_returns_to_exploring_and_forgets_the_rock():
     assert len(r.nav.collected) == 1
 
 
+@pytest.mark.parametrize("offset_m,chased", [(2.6, False), (6.0, True)])
+def test_remembered_echo_of_a_collected_rock_is_not_chased(offset_m, chased):
+    """A rock seen from afar is remembered a few metres off; once collected, that echo is no target.
+    Samples lie at least 5 m apart, so a remembered rock 6 m away is another sample."""
+    r = make_rover()
+    r.nav.collected.append((105.0, 85.0))
+    r.samples_remaining = 5
+    r.rocks_world = [(105.0 + offset_m * math.cos(0.6), 85.0 + offset_m * math.sin(0.6))]
+    r.rock_angles, r.rock_dists = np.zeros(0), np.zeros(0)
+    decision.decision_step(r)
+    assert (r.nav.rock_target is not None) == chased
+
+
 def test_goes_home_when_done_and_parks():
     r = make_rover(pos=(110.0, 85.0))
     r.samples_remaining = 0
@@ -236,3 +249,33 @@ def test_spinning_twice_at_one_place_backs_off_then_drives_ahead():
         phases.append(nav.recovery.command(t)[0])
         nav.recovery = None
     assert phases == ["back", "ahead"]
+
+
+def _turn_toward_frontier_behind(follow_steer, seconds=4.0):
+    """The only frontier is behind (east, rover faces west): the rover turns in place.
+
+    follow_steer: the heading responds to the steering (45 deg/s at full lock) or stays put (wedged).
+    """
+    r = make_rover(pos=(100.0, 85.0), yaw=180.0)
+    modes = []
+    for k in range(int(seconds / DT)):
+        r.total_time = 10.0 + k * DT
+        decision.decision_step(r)
+        assert_sane(r)
+        modes.append(r.mode)
+        if follow_steer and r.throttle == 0 and r.brake == 0:
+            r.yaw = (r.yaw + 3.0 * DT * r.steer) % 360.0
+    return modes
+
+
+def test_wedged_turn_in_place_escapes_within_seconds():
+    modes = _turn_toward_frontier_behind(follow_steer=False)
+    assert modes[0] == "stop"
+    first = modes.index("stuck")
+    assert decision.ROTATE_BLOCKED_S <= first * DT <= decision.ROTATE_BLOCKED_S + 0.5
+    assert first * DT < decision.ROTATE_TIMEOUT_S
+
+
+def test_turn_in_place_that_turns_is_not_stuck():
+    modes = _turn_toward_frontier_behind(follow_steer=True)
+    assert modes[0] == "stop" and "stuck" not in modes

@@ -133,10 +133,10 @@ def test_progress_monitor_and_recovery_script():
     assert not any(mon.update(k * 0.04, (10 + 0.05 * k, 10.0), True) for k in range(200))
     assert not any(mon.update(k * 0.04, (10.0, 10.0), False) for k in range(200))
     rec = stuck.Recovery(0.0, turn_sign=1.0)
-    phases = [rec.command(t)[0] for t in np.arange(0, 3.0, 0.1) if rec.command(t)]
-    assert phases[0] == "back" and "turn" in phases
     back = rec.command(0.1)
-    assert back[1] < 0 and back[3] < 0, "reversing with right lock swings the nose left"
+    assert back[0] == "back" and back[1] < 0 and back[3] < 0, "reversing with right lock swings the nose left"
+    phases = [out[0] for out in (rec.command(t) for t in np.arange(0.2, 3.0, 0.1)) if out]
+    assert phases[0] == "back" and "turn" in phases
     assert rec.command(100.0) is None
     cells = stuck.blocked_cells_ahead((50.0, 50.0), 0.0)
     assert (cells[:, 1] >= 50).all() and len(cells) >= 2
@@ -163,3 +163,57 @@ def test_forward_escape_drives_ahead_at_full_lock():
     name, throttle, brake, steer = rec.command(0.1)
     assert name == "ahead" and throttle > 0 and brake == 0 and steer < 0
     assert [rec.command(t)[0] for t in np.arange(0, 3.0, 0.1) if rec.command(t)][-1] == "turn"
+
+
+def _run_recovery(rec, pose_at, until=10.0, dt=0.04):
+    """Drive a Recovery with poses from pose_at(t, out); returns the (t, phase, throttle, steer) it produced."""
+    out, t = [], 0.0
+    while t < until:
+        cmd = rec.command(t, pose_at(t, out))
+        if cmd is None:
+            break
+        out.append((t, cmd[0], cmd[1], cmd[3]))
+        t += dt
+    return out
+
+
+def test_recovery_swaps_a_freeing_move_that_does_not_budge_the_rover():
+    """Wedged so that only pulling away forward to the left moves it: the escape finds that move."""
+    pose = [50.0, 50.0, 90.0]
+
+    def pose_at(t, out):
+        if out and out[-1][2] > 0 and out[-1][3] > 0:  # only forward with left lock moves
+            pose[1] += 0.02
+        return tuple(pose)
+
+    out = _run_recovery(stuck.Recovery(0.0, turn_sign=1.0), pose_at)
+    moves = [(name, np.sign(thr), np.sign(st)) for _, name, thr, st in out if name in ("back", "ahead")]
+    tried = list(dict.fromkeys(moves))
+    assert tried[0] == ("back", -1, -1) and ("ahead", 1, 1) in tried
+    assert tried[-1] == ("ahead", 1, 1), "once a move frees the rover the escape keeps it"
+    kept = sum(1 for m in moves if m == ("ahead", 1, 1)) * 0.04
+    assert kept >= stuck.BACK_OFF_S - 0.1
+    assert pose[1] > 50.5
+
+
+def test_recovery_that_moves_keeps_its_first_move_and_full_turn():
+    pose = [50.0, 50.0, 90.0]
+
+    def pose_at(t, out):
+        if out:
+            pose[1] += 0.03 * np.sign(out[-1][2])
+            pose[2] += 1.8 * np.sign(out[-1][3]) if out[-1][1] == "turn" else 0.0
+        return tuple(pose)
+
+    out = _run_recovery(stuck.Recovery(0.0, turn_sign=-1.0), pose_at)
+    assert {name for _, name, thr, st in out if thr != 0} == {"back"}
+    turn_s = sum(1 for o in out if o[1] == "turn") * 0.04
+    assert turn_s >= stuck.TURN_S - 0.1
+
+
+def test_pinned_rover_tries_every_move_and_cuts_the_blocked_turn_short():
+    out = _run_recovery(stuck.Recovery(0.0, turn_sign=1.0), lambda t, o: (50.0, 50.0, 90.0))
+    moves = {(name, np.sign(thr), np.sign(st)) for _, name, thr, st in out if name in ("back", "ahead")}
+    assert len(moves) == len(stuck.escape_moves(1.0))
+    turn_s = sum(1 for o in out if o[1] == "turn") * 0.04
+    assert 0 < turn_s <= stuck.TURN_BLOCKED_S + 0.1 < stuck.TURN_S
