@@ -49,6 +49,7 @@ NAV_RGB_MIN = (161, 161, 161)  # light floor sand: every channel above 160
 ROCK_RGB_MIN = (110, 90, 0)  # sample rocks are gold (1, 0.85, 0): bright R and G ...
 ROCK_RGB_MAX = (255, 255, 60)  # ... and little blue
 ROCK_MIN_PIXELS = 4  # smaller gold blobs are ignored as noise, px
+ROCK_MAX_WIDTH_M = 0.25  # no sample looks wider than this (largest 0.19 m; real blobs 90 % <= 0.3 m incl. slopes), m
 
 # --- top-down grid (rover frame) used for both decision outputs and map votes ---
 GRID_RES_M = 0.1  # top-down cell edge, m (the starter's 10 px per metre)
@@ -420,15 +421,17 @@ def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
     """Per gold blob: rover-frame floor point under its nearest (bottom) pixel, plus per-pixel polar.
 
     The blob's bottom row touches the floor, so projecting it is exact; its centroid
-    would project too far because the rock stands above the floor.  Returns
-    (points [(x, y)], angles, dists) where every blob pixel column is placed on the
-    floor at the blob's base row.
+    would project too far because the rock stands above the floor.  A rock resting on
+    a wall slope stands above the floor too, and the camera is so low (0.21 m) that
+    its base then projects several times too far; the blob's width caps the distance
+    (no sample looks wider than ROCK_MAX_WIDTH_M).  Returns (points [(x, y)], angles,
+    dists) where every blob pixel column is placed on the floor at the blob's base row.
     """
     rock8 = _to_u8(rock8)
     bx, by, bw, bh = cv2.boundingRect(rock8)
     crop = rock8[by:by + bh, bx:bx + bw]
     n, labels, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
-    us_all, vs_all, blob_u, blob_v = [], [], [], []
+    us_all, vs_all, blob_u, blob_v, blob_w, blob_of = [], [], [], [], [], []
     for k in range(1, n):
         if stats[k, cv2.CC_STAT_AREA] < ROCK_MIN_PIXELS:
             continue
@@ -436,8 +439,10 @@ def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
         w, h = stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]
         vs, us = np.nonzero(labels[y0:y0 + h, x0:x0 + w] == k)
         bottom = vs.max()
+        blob_of.append(np.full(us.shape, len(blob_u)))
         blob_u.append(us[vs == bottom].mean() + x0 + bx)
         blob_v.append(bottom + y0 + by)
+        blob_w.append(w)
         us_all.append(us + x0 + bx)
         vs_all.append(np.full(us.shape, bottom + y0 + by))
     if not blob_u:
@@ -445,10 +450,25 @@ def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
     tilt = body_rotation(90.0, pitch_deg, roll_deg)
     cam = camera_position(pitch_deg, roll_deg)
     xr, yr, ok = pixel_to_rover(np.array(blob_u), np.array(blob_v), _tilt=tilt, _cam=cam)
+    shrink = _width_shrink(xr, yr, np.array(blob_w, np.float64))
+    xr, yr = _shrink_toward_camera(xr, yr, shrink)
     points = [(float(a), float(b)) for a, b, good in zip(xr, yr, ok) if good]
     px, py, pv = pixel_to_rover(np.concatenate(us_all), np.concatenate(vs_all), _tilt=tilt, _cam=cam)
+    px, py = _shrink_toward_camera(px, py, shrink[np.concatenate(blob_of)])
     dists, angles = to_polar_coords(px[pv], py[pv])
     return points, angles, dists
+
+
+def _width_shrink(xr, yr, width_px):
+    """Per blob, factor (<= 1) that brings its floor distance from the camera within the width cap."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        from_cam = np.hypot(xr - CAMERA_FORWARD_M, yr)
+        cap = FOCAL_PX * ROCK_MAX_WIDTH_M / np.maximum(width_px, 1.0)
+        return np.where(from_cam > cap, cap / from_cam, 1.0)
+
+
+def _shrink_toward_camera(xr, yr, factor):
+    return CAMERA_FORWARD_M + (xr - CAMERA_FORWARD_M) * factor, yr * factor
 
 
 def _finite(v) -> bool:

@@ -86,6 +86,23 @@ def test_rock_world_position_uses_the_blob_base():
     assert r.worldmap[int(y), int(x), 1] == 255
 
 
+def test_rock_raised_on_a_slope_is_placed_by_its_width_not_its_base():
+    # a 12 px wide gold blob whose base row would lie on the floor 8 m ahead: a sample that
+    # small is ~2 m away, so its base is above the floor (a wall slope) and the width caps it
+    _, v_base, _ = P.rover_to_pixel(8.0, 0.0)
+    base = int(v_base)
+    img = _synthetic()
+    img[base - 9:base + 1, 154:166] = (230, 195, 15)
+    r = _rover(img, pos=(100.0, 100.0), yaw=0.0)
+    for _ in range(P.ROCK_MIN_HITS):
+        P.perception_step(r)
+    assert len(r.rocks_world) == 1
+    x, y = r.rocks_world[0]
+    capped = P.CAMERA_FORWARD_M + P.FOCAL_PX * P.ROCK_MAX_WIDTH_M / 12
+    assert x - 100.0 == pytest.approx(capped, abs=0.2) and y == pytest.approx(100.0, abs=0.2)
+    assert r.rock_dists.max() <= capped + 0.3
+
+
 def test_perception_step_fills_rover_fields():
     r = P.perception_step(_rover(_synthetic(), pos=(100.0, 90.0), yaw=45.0))
     assert r.map_updated
