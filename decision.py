@@ -73,7 +73,7 @@ FRONTIER_REACHED_M = 1.5  # a frontier target this close is reached (and ignored
 OWN_CELLS_RADIUS = 1  # cells around the rover's own cell always treated as drivable, cells
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
 EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
-BLOCKED_MEMORY_S = 120.0  # cells the rover got stuck on stay blocked this long, s
+BLOCKED_MEMORY_S = 600.0  # cells the rover got stuck on stay blocked this long (the hub near the start is crossed again and again), s
 PATH_END_SLOW_M = 3.0  # slow down over the last metres of a path to a sample or home, m
 
 # --- samples -----------------------------------------------------------------------------
@@ -786,11 +786,19 @@ def _plan_search(rover, nav, s):
 def _plan_to(rover, nav, s, kind, goal):
     """A* to a fixed goal cell (rock, home), allowed through unmapped ground at a premium."""
     free, obstacle, _unknown = _grids(rover)
-    cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=True, soft_obstacles=True)
-    _open_around_rover(cost, grid.world_to_cell(s.pos))
-    start = _start_cell(cost, s)
-    g = goal if np.isfinite(cost[goal]) else grid.nearest_passable(cost, goal)
-    cells = astar.astar(cost, start, g) if (start is not None and g is not None) else []
+    blocked = _blocked(nav, s)
+    cells = []
+    for use_blocked in (True, False):  # stuck memory must never cut the way to a rock or home
+        if not use_blocked and not blocked.any():
+            break
+        cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=True,
+                              soft_obstacles=True)
+        _open_around_rover(cost, grid.world_to_cell(s.pos))
+        start = _start_cell(cost, s)
+        g = goal if np.isfinite(cost[goal]) else grid.nearest_passable(cost, goal)
+        cells = astar.astar(cost, start, g) if (start is not None and g is not None) else []
+        if cells:
+            break
     if not cells:
         cells = [grid.world_to_cell(s.pos), goal]
     _set_path(nav, s, kind, goal, cells)
