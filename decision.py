@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import perception
 from navigation import astar, explore, grid, pursuit, reactive, stuck
 
 log = logging.getLogger(__name__)
@@ -706,6 +707,13 @@ def _grids(rover):
     return grid.classify(wm)
 
 
+def _roughness(rover):
+    """Per-cell roughness from perception's votes, or None before perception has run."""
+    if getattr(rover, "perception_memory", None) is None:
+        return None
+    return grid.roughness(*perception.occupancy_grids(rover))
+
+
 def _start_cell(cost, s):
     cell = grid.world_to_cell(s.pos)
     return grid.nearest_passable(cost, cell) if cell is not None else None
@@ -743,11 +751,12 @@ def _plan_explore(rover, nav, s):
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, nav.seen_close)
     targets, cost, parent = [], None, None
     blocked = _blocked(nav, s)
+    rough = _roughness(rover)
     for use_blocked in (True, False):  # stale stuck memory must never hide the rest of the map
         if not use_blocked and not blocked.any():
             break
         cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=False,
-                              soft_obstacles=True)
+                              soft_obstacles=True, rough=rough)
         cell = grid.world_to_cell(s.pos)
         _open_around_rover(cost, cell)
         dist, parent = astar.distance_field(cost, cell)
@@ -770,7 +779,8 @@ def _plan_explore(rover, nav, s):
 
 def _plan_search(rover, nav, s):
     free, obstacle, _unknown = _grids(rover)
-    cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=False, soft_obstacles=True)
+    cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=False, soft_obstacles=True,
+                          rough=_roughness(rover))
     cell = grid.world_to_cell(s.pos)
     _open_around_rover(cost, cell)
     dist, parent = astar.distance_field(cost, cell)
@@ -787,12 +797,13 @@ def _plan_to(rover, nav, s, kind, goal):
     """A* to a fixed goal cell (rock, home), allowed through unmapped ground at a premium."""
     free, obstacle, _unknown = _grids(rover)
     blocked = _blocked(nav, s)
+    rough = _roughness(rover)
     cells = []
     for use_blocked in (True, False):  # stuck memory must never cut the way to a rock or home
         if not use_blocked and not blocked.any():
             break
         cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=True,
-                              soft_obstacles=True)
+                              soft_obstacles=True, rough=rough)
         _open_around_rover(cost, grid.world_to_cell(s.pos))
         start = _start_cell(cost, s)
         g = goal if np.isfinite(cost[goal]) else grid.nearest_passable(cost, goal)

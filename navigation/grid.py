@@ -18,6 +18,9 @@ CLEARANCE_PENALTY = 3.0  # extra cost per metre right next to an obstacle (falls
 OBSTACLE_COST = 12.0  # travel cost of one metre through a mapped obstacle cell when soft (maps misjudge shadows behind rocks)
 HARD_CLEARANCE_M = 1.5  # cells touching an obstacle (also diagonally) cost HARD_CLEARANCE_COST extra, m
 HARD_CLEARANCE_COST = 12.0  # extra cost per metre of a cell inside HARD_CLEARANCE_M (used only to squeeze past)
+ROUGH_FROM_SHARE = 0.4  # a mapped-free cell with more obstacle votes than this share is rough (small rocks), 0..1
+ROUGH_FULL_SHARE = 0.8  # ...and fully rough from this share, 0..1
+ROUGH_COST = 4.0  # extra travel cost of one metre over a fully rough cell
 
 
 def classify(worldmap, nav_confidence=None):
@@ -49,14 +52,25 @@ def obstacle_distance(obstacle):
     return cv2.distanceTransform(passable, cv2.DIST_L2, 3)
 
 
-def cost_grid(free, obstacle, blocked=None, allow_unknown=False, soft_obstacles=False):
+def roughness(nav_confidence, obstacle_confidence):
+    """0..1 per cell from its obstacle share of votes: a field of small rocks maps as free (each 1 m
+    cell is mostly floor) but with many obstacle votes, and is where the rover gets stuck."""
+    nav = np.asarray(nav_confidence, np.float32)
+    obs = np.asarray(obstacle_confidence, np.float32)
+    total = nav + obs
+    share = np.divide(obs, total, out=np.zeros_like(total), where=total > 0)
+    return np.clip((share - ROUGH_FROM_SHARE) / (ROUGH_FULL_SHARE - ROUGH_FROM_SHARE), 0.0, 1.0)
+
+
+def cost_grid(free, obstacle, blocked=None, allow_unknown=False, soft_obstacles=False, rough=None):
     """Per-cell travel cost (float32, inf = impassable) for the path planner.
 
     Free cells cost FREE_COST plus a clearance penalty near obstacles; unknown
     cells are impassable unless `allow_unknown`; mapped obstacles are
     impassable, or cost OBSTACLE_COST per metre with `soft_obstacles` (the
     camera maps the ground behind a rock as obstacle until seen from the
-    side); `blocked` (where the rover really got stuck) is always impassable.
+    side); `blocked` (where the rover really got stuck) is always impassable;
+    `rough` (0..1, see `roughness`) adds up to ROUGH_COST per metre.
     """
     obst = obstacle.copy()
     if blocked is not None:
@@ -66,6 +80,8 @@ def cost_grid(free, obstacle, blocked=None, allow_unknown=False, soft_obstacles=
     near = np.clip(CLEARANCE_M - dist, 0.0, None) / CLEARANCE_M * CLEARANCE_PENALTY
     cost = base + near.astype(np.float32)
     cost[dist < HARD_CLEARANCE_M] += HARD_CLEARANCE_COST
+    if rough is not None and np.shape(rough) == cost.shape:
+        cost += ROUGH_COST * np.asarray(rough, np.float32)
     cost[obstacle] = OBSTACLE_COST + CLEARANCE_PENALTY + HARD_CLEARANCE_COST if soft_obstacles else np.inf
     if blocked is not None:
         cost[blocked] = np.inf

@@ -217,3 +217,24 @@ def test_pinned_rover_tries_every_move_and_cuts_the_blocked_turn_short():
     assert len(moves) == len(stuck.escape_moves(1.0))
     turn_s = sum(1 for o in out if o[1] == "turn") * 0.04
     assert 0 < turn_s <= stuck.TURN_BLOCKED_S + 0.1 < stuck.TURN_S
+
+
+def test_roughness_follows_the_obstacle_share_of_votes():
+    nav = np.array([[0.9, 0.5, 0.1, 0.0]], np.float32)
+    obs = np.array([[0.1, 0.5, 0.9, 0.0]], np.float32)
+    r = grid.roughness(nav, obs)
+    assert r[0, 0] == 0.0 and r[0, 3] == 0.0, "clean and never-seen cells are smooth"
+    assert 0.0 < r[0, 1] < 1.0 and r[0, 2] == 1.0
+
+
+def test_paths_go_round_a_field_of_small_rocks_the_map_shows_as_floor():
+    free = np.zeros((200, 200), bool)
+    free[90:111, 40:81] = True  # an open floor 20 m wide
+    obstacle = np.zeros_like(free)
+    rough = np.zeros((200, 200), np.float32)
+    rough[96:105, 55:65] = 1.0  # a rock field across the straight line, floor around it
+    start, goal = (100, 42), (100, 78)
+    straight = astar.astar(grid.cost_grid(free, obstacle), start, goal)
+    around = astar.astar(grid.cost_grid(free, obstacle, rough=rough), start, goal)
+    assert any(rough[r, c] > 0 for r, c in straight)
+    assert not any(rough[r, c] > 0 for r, c in around)
