@@ -70,18 +70,24 @@ def test_no_rock_in_grid_image():
     assert r.rock_angles.size == 0 and r.rocks_world == []
 
 
-def test_rock_world_position_uses_the_blob_base():
-    # a 12 px tall gold blob whose base sits on the floor 2 m ahead: the remembered position
-    # must be ~2 m ahead, not farther (its centroid would project farther)
-    _, v_base, _ = P.rover_to_pixel(2.0, 0.0)
+def _remembered_gold_blob(base_ahead_m, height_px, cols):
+    """Rover at (100, 100) facing east sees a gold blob whose bottom row would be on the floor
+    base_ahead_m ahead; returns the rover and the one remembered rock position."""
+    _, v_base, _ = P.rover_to_pixel(base_ahead_m, 0.0)
     base = int(v_base)
     img = _synthetic()
-    img[base - 11:base + 1, 155:165] = (230, 195, 15)
+    img[base - height_px + 1:base + 1, cols[0]:cols[1]] = (230, 195, 15)
     r = _rover(img, pos=(100.0, 100.0), yaw=0.0)
     for _ in range(P.ROCK_MIN_HITS):
         P.perception_step(r)
     assert len(r.rocks_world) == 1
-    x, y = r.rocks_world[0]
+    return r, r.rocks_world[0]
+
+
+def test_rock_world_position_uses_the_blob_base():
+    # a 12 px tall gold blob whose base sits on the floor 2 m ahead: the remembered position
+    # must be ~2 m ahead, not farther (its centroid would project farther)
+    r, (x, y) = _remembered_gold_blob(2.0, 12, (155, 165))
     assert x == pytest.approx(102.0, abs=0.15) and y == pytest.approx(100.0, abs=0.15)
     assert r.worldmap[int(y), int(x), 1] == 255
 
@@ -89,15 +95,7 @@ def test_rock_world_position_uses_the_blob_base():
 def test_rock_raised_on_a_slope_is_placed_by_its_width_not_its_base():
     # a 12 px wide gold blob whose base row would lie on the floor 8 m ahead: a sample that
     # small is ~2 m away, so its base is above the floor (a wall slope) and the width caps it
-    _, v_base, _ = P.rover_to_pixel(8.0, 0.0)
-    base = int(v_base)
-    img = _synthetic()
-    img[base - 9:base + 1, 154:166] = (230, 195, 15)
-    r = _rover(img, pos=(100.0, 100.0), yaw=0.0)
-    for _ in range(P.ROCK_MIN_HITS):
-        P.perception_step(r)
-    assert len(r.rocks_world) == 1
-    x, y = r.rocks_world[0]
+    r, (x, y) = _remembered_gold_blob(8.0, 10, (154, 166))
     capped = P.CAMERA_FORWARD_M + P.FOCAL_PX * P.ROCK_MAX_WIDTH_M / 12
     assert x - 100.0 == pytest.approx(capped, abs=0.2) and y == pytest.approx(100.0, abs=0.2)
     assert r.rock_dists.max() <= capped + 0.3
