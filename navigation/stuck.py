@@ -1,8 +1,10 @@
-"""Lack-of-progress detection and a scripted back-off-and-turn recovery.
+"""Lack-of-progress detection and a free-settle-turn recovery.
 
 Progress is judged from pose alone (position over a time window while the
 rover is commanded to drive), because wheel speed lies when the rover is
-wedged on a rock or spinning on a slope.
+wedged on a rock or spinning on a slope. For the same reason the recovery
+watches the pose: a freeing move that does not budge the rover is swapped
+for another.
 """
 from collections import deque
 
