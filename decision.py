@@ -404,9 +404,7 @@ def _check_stuck(nav, s):
     driving = nav.last_cmd.throttle > 0.05 and nav.last_cmd.brake == 0.0
     if not nav.progress.update(s.t, s.pos, driving):
         return False
-    if nav.stuck_since is None:
-        nav.stuck_since = s.t - stuck.STUCK_WINDOW_S
-    _begin_recovery(nav, s, "stuck")
+    _begin_recovery(nav, s, "stuck", stuck.STUCK_WINDOW_S)
     for r, c in stuck.blocked_cells_ahead(s.pos, s.yaw):
         if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
             nav.blocked_at[r, c] = s.t
@@ -420,20 +418,23 @@ def _check_turn_blocked(nav, s):
     if nav.rotate_heading is None or cmd.throttle != 0.0 or cmd.brake != 0.0 or cmd.steer == 0.0:
         nav.turn_ref = None
         return False
-    if nav.turn_ref is None or abs(_heading_diff(s.yaw, nav.turn_ref[1])) >= ROTATE_BLOCKED_DEG:
+    if nav.turn_ref is None or abs(stuck.heading_diff_deg(s.yaw, nav.turn_ref[1])) >= ROTATE_BLOCKED_DEG:
         nav.turn_ref = (s.t, s.yaw)
         return False
     if s.t - nav.turn_ref[0] < ROTATE_BLOCKED_S:
         return False
     nav.turn_ref = None
-    if nav.stuck_since is None:
-        nav.stuck_since = s.t - ROTATE_BLOCKED_S
-    _begin_recovery(nav, s, "turn blocked")
+    _begin_recovery(nav, s, "turn blocked", ROTATE_BLOCKED_S)
     return True
 
 
-def _begin_recovery(nav, s, why):
-    """Start an escape; a repeat at the same place escapes to the other side and for longer."""
+def _begin_recovery(nav, s, why, noticed_after_s):
+    """Start an escape; a repeat at the same place escapes to the other side and for longer.
+
+    noticed_after_s: how long the rover had been stuck when this was noticed, s.
+    """
+    if nav.stuck_since is None:
+        nav.stuck_since = s.t - noticed_after_s
     repeat = stuck.count_recent_nearby(nav.stuck_events, s.t, s.pos)
     nav.stuck_events.append((s.t, s.pos[0], s.pos[1]))
     sign = _escape_side(nav, s)
@@ -445,10 +446,6 @@ def _begin_recovery(nav, s, why):
     nav.plan_time = -math.inf  # replan around the blocked cells
     log.info("%s at (%.1f, %.1f) t=%.1f, repeat %d, escaping %s", why, s.pos[0], s.pos[1], s.t, repeat,
              "left" if sign > 0 else "right")
-
-
-def _heading_diff(a, b):
-    return (a - b + 180.0) % 360.0 - 180.0
 
 
 def _escape_side(nav, s):
@@ -745,21 +742,27 @@ def _blocked(nav, s):
     return (s.t - nav.blocked_at) < BLOCKED_MEMORY_S
 
 
+def _cost_grids(rover, nav, s, free, obstacle, allow_unknown):
+    """Cost grids to plan on, each with the rover's own cells open: with the stuck memory, then
+    (when there is any) without it, because stale stuck memory must never hide a goal."""
+    blocked = _blocked(nav, s)
+    rough = _roughness(rover)
+    for use_blocked in (True, False):
+        if not use_blocked and not blocked.any():
+            return
+        cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=allow_unknown,
+                              soft_obstacles=True, rough=rough)
+        _open_around_rover(cost, grid.world_to_cell(s.pos))
+        yield cost
+
+
 def _plan_explore(rover, nav, s):
     """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
     free, obstacle, unknown = _grids(rover)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, nav.seen_close)
     targets, cost, parent = [], None, None
-    blocked = _blocked(nav, s)
-    rough = _roughness(rover)
-    for use_blocked in (True, False):  # stale stuck memory must never hide the rest of the map
-        if not use_blocked and not blocked.any():
-            break
-        cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=False,
-                              soft_obstacles=True, rough=rough)
-        cell = grid.world_to_cell(s.pos)
-        _open_around_rover(cost, cell)
-        dist, parent = astar.distance_field(cost, cell)
+    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
+        dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
         targets = explore.frontier_targets(mask, dist)
         if len(targets):
             break
@@ -796,15 +799,8 @@ def _plan_search(rover, nav, s):
 def _plan_to(rover, nav, s, kind, goal):
     """A* to a fixed goal cell (rock, home), allowed through unmapped ground at a premium."""
     free, obstacle, _unknown = _grids(rover)
-    blocked = _blocked(nav, s)
-    rough = _roughness(rover)
     cells = []
-    for use_blocked in (True, False):  # stuck memory must never cut the way to a rock or home
-        if not use_blocked and not blocked.any():
-            break
-        cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=True,
-                              soft_obstacles=True, rough=rough)
-        _open_around_rover(cost, grid.world_to_cell(s.pos))
+    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=True):
         start = _start_cell(cost, s)
         g = goal if np.isfinite(cost[goal]) else grid.nearest_passable(cost, goal)
         cells = astar.astar(cost, start, g) if (start is not None and g is not None) else []

@@ -117,7 +117,7 @@ class Recovery:
     def _turn_blocked(self, t, pose):
         if pose is None:
             return False
-        if self.ref is None or abs(_angle_diff(pose[2], self.ref[3])) >= PROBE_MIN_TURN_DEG:
+        if self.ref is None or abs(heading_diff_deg(pose[2], self.ref[3])) >= PROBE_MIN_TURN_DEG:
             self.ref = (t, *pose)
             return False
         return t - self.ref[0] >= TURN_BLOCKED_S
@@ -131,14 +131,15 @@ def escape_moves(turn_sign, ahead=False):
     return fwd + back + last if ahead else back + fwd + last
 
 
-def _angle_diff(a, b):
+def heading_diff_deg(a, b):
+    """a - b in degrees, wrapped to [-180, 180)."""
     return (a - b + 180.0) % 360.0 - 180.0
 
 
 def _budged(ref, pose):
     """The rover moved or turned noticeably since `ref` (t, x, y, yaw)."""
     return (np.hypot(pose[0] - ref[1], pose[1] - ref[2]) >= PROBE_MIN_MOVE_M
-            or abs(_angle_diff(pose[2], ref[3])) >= PROBE_MIN_TURN_DEG)
+            or abs(heading_diff_deg(pose[2], ref[3])) >= PROBE_MIN_TURN_DEG)
 
 
 def count_recent_nearby(events, t, pos):
