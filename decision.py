@@ -698,7 +698,8 @@ def _needs_replan(nav, s):
 # ============================== planning ===============================================
 
 def _grids(rover):
-    wm = getattr(rover, "worldmap", None)
+    """(free, obstacle, unknown) from perception's drive map: sand in shadow is not driven on."""
+    wm = perception.drive_map(rover)
     if not isinstance(wm, np.ndarray) or wm.shape != (grid.GRID_SIZE, grid.GRID_SIZE, 3):
         wm = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE, 3), np.uint8)
     return grid.classify(wm)

@@ -9,6 +9,10 @@ Why it is built this way:
   nearby ground (range limit) while the body is level enough (tilt gate); the
   displayed ``rover.worldmap`` is rebuilt from the votes every frame, so early
   wrong marks are overturned by later, better views.
+- Sand in a cast shadow is too dark for the classic threshold; a colour-and-texture
+  rule finds it.  It is mapped as floor (the map is scored against the canyon's
+  floor), but the planner drives on the bright-sand map only (:func:`drive_map`):
+  a shadowed pocket is often a wall foot where the rover wedges.
 - Speed: everything per frame is a few OpenCV calls on a fixed-size top-down grid
   plus ``np.bincount`` on precomputed cell indices (well under 1 ms).
 
@@ -46,6 +50,13 @@ CAMERA_HEIGHT_M = CAMERA_MOUNT_UP_M + ROOT_HEIGHT_M  # camera above a flat floor
 
 # --- colour thresholds (RGB, inclusive) ---
 NAV_RGB_MIN = (161, 161, 161)  # light floor sand: every channel above 160
+# sand in a cast shadow: darker than NAV_RGB_MIN but still sand-coloured (grey-beige) and smooth
+SHADE_SAND_MIN_R = 130  # red at least this (walls and rock faces in shadow are darker), 0..255
+SHADE_SAND_MIN_G_PER_R = 0.90  # green / red at least this (slope feet and rock faces are redder)
+SHADE_SAND_MIN_B_PER_R = 0.83  # blue / red at least this (gold samples and brown rock have little blue)
+SHADE_SAND_MAX_SD = 10.0  # red standard deviation in the window at most this (rough rock is textured), 0..255
+SHADE_SAND_WINDOW_PX = 5  # square window for that texture test, px
+SHADE_SAND_FIRST_ROW = 60  # rows above this are never floor within map range, px
 ROCK_RGB_MIN = (110, 90, 0)  # sample rocks are gold (1, 0.85, 0): bright R and G ...
 ROCK_RGB_MAX = (255, 255, 60)  # ... and little blue
 ROCK_MIN_PIXELS = 4  # smaller gold blobs are ignored as noise, px
@@ -109,6 +120,32 @@ _load_camera_json()
 def navigable_mask(rgb: np.ndarray) -> np.ndarray:
     """Light floor sand: bool (160, 320), True where every channel > 160."""
     return cv2.inRange(rgb, NAV_RGB_MIN, (255, 255, 255)) > 0
+
+
+def shadowed_sand_mask(rgb: np.ndarray) -> np.ndarray:
+    """Sand in a cast shadow (not already light sand): bool (160, 320)."""
+    return cv2.bitwise_and(shadowed_sand_u8(rgb), cv2.bitwise_not(cv2.inRange(rgb, NAV_RGB_MIN, (255, 255, 255)))) > 0
+
+
+def shadowed_sand_u8(rgb: np.ndarray) -> np.ndarray:
+    """uint8 0/255 (160, 320): sand-coloured, smooth pixels at or below SHADE_SAND_FIRST_ROW.
+
+    Shadow dims every channel alike, so sand keeps its grey-beige ratios; brown
+    slope feet, gold samples and dark rock do not.  Rough rock can share the
+    colour but not the smoothness, hence the local spread of red.
+    """
+    out = np.zeros(rgb.shape[:2], np.uint8)
+    sub = rgb[SHADE_SAND_FIRST_ROW:]
+    red = sub[:, :, 0].astype(np.float32)
+    colour = ((red >= SHADE_SAND_MIN_R)
+              & (sub[:, :, 1] >= SHADE_SAND_MIN_G_PER_R * red)
+              & (sub[:, :, 2] >= SHADE_SAND_MIN_B_PER_R * red))
+    k = (SHADE_SAND_WINDOW_PX, SHADE_SAND_WINDOW_PX)
+    mean = cv2.boxFilter(red, -1, k, borderType=cv2.BORDER_REFLECT)
+    mean_sq = cv2.boxFilter(red * red, -1, k, borderType=cv2.BORDER_REFLECT)
+    smooth = (mean_sq - mean * mean) <= SHADE_SAND_MAX_SD ** 2
+    out[SHADE_SAND_FIRST_ROW:] = (colour & smooth).view(np.uint8) * np.uint8(255)
+    return out
 
 
 def rock_mask(rgb: np.ndarray) -> np.ndarray:
@@ -269,7 +306,7 @@ def _build_tables():
     _LEVEL_H = ground_homography(0.0, 0.0)
 
 
-_LABEL_UNKNOWN, _LABEL_OBSTACLE, _LABEL_NAV = 0, 1, 2
+_LABEL_UNKNOWN, _LABEL_OBSTACLE, _LABEL_NAV, _LABEL_SHADE = 0, 1, 2, 3
 _build_tables()
 
 
@@ -298,16 +335,21 @@ class PerceptionMemory:
         come from level frames (TILT_GATE_DEG) and ground within MAP_RANGE_M.
     rock_clusters: list of [sum_w*x, sum_w*y, sum_w, hits] per remembered sample rock.
     frames_seen, frames_mapped: counters (mapped = passed the tilt gate).
-    last_grid: uint8 top-down label grid of the last frame (0 unknown, 1 obstacle, 2 navigable),
+    shade_votes: float32 (200, 200); the part of obs_votes that was sand in shadow.  The
+        scored ``rover.worldmap`` counts it as navigable, the drive map as obstacle.
+    last_grid: uint8 top-down label grid of the last frame (0 unknown, 1 obstacle, 2 navigable,
+        3 sand in shadow),
         rows = forward distance (row i at (i + 0.5) * GRID_RES_M), cols = lateral (left at high j).
     """
     nav_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     obs_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
+    shade_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     rock_clusters: List[list] = field(default_factory=list)
     frames_seen: int = 0
     frames_mapped: int = 0
     last_grid: Optional[np.ndarray] = None
     worldmap: Optional[np.ndarray] = None  # the array last handed out as rover.worldmap
+    drive_worldmap: Optional[np.ndarray] = None  # same layout, shadowed sand as obstacle (see drive_map)
     drawn_rocks: List[Tuple[float, float]] = field(default_factory=list)
 
 
@@ -335,20 +377,39 @@ def occupancy_grids(rover) -> Tuple[np.ndarray, np.ndarray]:
     return nav.astype(np.float32), obs.astype(np.float32)
 
 
-def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, window=None) -> np.ndarray:
+def drive_map(rover) -> np.ndarray:
+    """The map to plan on: like ``rover.worldmap`` but sand in shadow counts as obstacle, no rocks.
+
+    Shadowed floor pockets are mostly wall feet and overhang gaps; driving into them
+    wedged the rover (twin seeds 0-19: 5 missions of 20 incomplete), so planning
+    keeps to floor the classic threshold sees.  Falls back to ``rover.worldmap``.
+    """
+    mem = getattr(rover, "perception_memory", None)
+    if mem is not None and mem.drive_worldmap is not None:
+        return mem.drive_worldmap
+    return getattr(rover, "worldmap", None)
+
+
+def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, window=None,
+                    drive=False) -> np.ndarray:
     """Rebuild the displayed worldmap from the votes (R obstacle, G rock, B navigable).
 
     ``window`` = (y0, y1, x0, x1) limits the R/B rebuild to the cells whose votes changed.
+    ``drive`` renders the drive map: shadowed sand stays obstacle and rocks are not drawn.
     """
     if out is None:
         out = np.zeros((WORLD_SIZE, WORLD_SIZE, 3), np.uint8)
     y0, y1, x0, x1 = (0, WORLD_SIZE, 0, WORLD_SIZE) if window is None else window
     nav = mem.nav_votes[y0:y1, x0:x1]
     total = nav + mem.obs_votes[y0:y1, x0:x1]
+    if not drive:
+        nav = nav + mem.shade_votes[y0:y1, x0:x1]
     seen = total >= MIN_CELL_VOTES
     is_nav = seen & (nav > NAV_MAJORITY * total)
     out[y0:y1, x0:x1, 2] = is_nav.view(np.uint8) * np.uint8(255)
     out[y0:y1, x0:x1, 0] = (seen & ~is_nav).view(np.uint8) * np.uint8(255)
+    if drive:
+        return out
     rocks = rocks_from_memory(mem)
     if window is None or rocks != mem.drawn_rocks:
         out[:, :, 1] = 0
@@ -397,6 +458,8 @@ def _to_u8(mask: np.ndarray) -> np.ndarray:
 
 _GRID_LUT = np.zeros(256, np.uint8)  # warped nav8 value -> label
 _GRID_LUT[0], _GRID_LUT[255], _GRID_LUT[128] = 1, 2, 0  # obstacle, navigable, outside the image
+_SHADE_VALUE = 192  # camera-mask value of sand in shadow (neither 0, 255 nor the border)
+_GRID_LUT[_SHADE_VALUE] = _LABEL_SHADE
 _WARP_BORDER = 128  # value the warp gives grid cells outside the camera image
 
 
@@ -488,10 +551,17 @@ def vision_overlay(rgb: np.ndarray, nav: np.ndarray, rock: np.ndarray) -> np.nda
     return _overlay_u8(rgb, _to_u8(nav), _to_u8(rock))
 
 
-def _overlay_u8(rgb: np.ndarray, nav8: np.ndarray, rock8: np.ndarray) -> np.ndarray:
-    obs8 = cv2.bitwise_not(cv2.bitwise_or(nav8, rock8))
+def _overlay_u8(rgb: np.ndarray, nav8: np.ndarray, rock8: np.ndarray, shade8: Optional[np.ndarray] = None
+                ) -> np.ndarray:
+    """shade8 (sand in shadow, 0/255, disjoint from nav8) is drawn half blue."""
+    known = cv2.bitwise_or(nav8, rock8)
+    blue = nav8
+    if shade8 is not None:
+        known = cv2.bitwise_or(known, shade8)
+        blue = cv2.bitwise_or(nav8, np.bitwise_and(shade8, np.uint8(128)))
+    obs8 = cv2.bitwise_not(known)
     obs8[:_HORIZON_ROW] = 0
-    overlay = cv2.merge([cv2.bitwise_or(obs8, rock8), rock8, nav8])
+    overlay = cv2.merge([cv2.bitwise_or(obs8, rock8), rock8, blue])
     return cv2.addWeighted(rgb, VISION_BLEND, overlay, 1.0 - VISION_BLEND, 0.0)
 
 
@@ -514,8 +584,13 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
     w_cols = x1 - x0
     local = (iy - y0) * w_cols + (ix - x0)
     w = _MAP_WEIGHT[known_idx]
-    is_nav = labels[known_idx] == _LABEL_NAV
+    kind = labels[known_idx]
+    is_nav = kind == _LABEL_NAV
+    is_shade = kind == _LABEL_SHADE
     size = (y1 - y0) * w_cols
+    if is_shade.any():
+        mem.shade_votes[y0:y1, x0:x1] += np.bincount(
+            local[is_shade], w[is_shade] * OBS_VOTE_WEIGHT, size).reshape(y1 - y0, w_cols)
     mem.nav_votes[y0:y1, x0:x1] += np.bincount(local[is_nav], w[is_nav] * NAV_VOTE_WEIGHT, size).reshape(
         y1 - y0, w_cols)
     mem.obs_votes[y0:y1, x0:x1] += np.bincount(local[~is_nav], w[~is_nav] * OBS_VOTE_WEIGHT, size).reshape(
@@ -538,12 +613,15 @@ def perception_step(rover):
 
     nav8 = cv2.inRange(img, NAV_RGB_MIN, (255, 255, 255))
     rock8 = cv2.inRange(img, ROCK_RGB_MIN, ROCK_RGB_MAX)
-    grid = _warp_labels(nav8, pitch, roll)
+    shade8 = cv2.bitwise_and(shadowed_sand_u8(img), cv2.bitwise_not(nav8))
+    labels8 = cv2.bitwise_or(nav8, np.bitwise_and(shade8, np.uint8(_SHADE_VALUE)))
+    grid = _warp_labels(labels8, pitch, roll)
     mem.last_grid = grid
 
-    # decision outputs (always, even when tilted: the warp already accounts for tilt)
+    # decision outputs (always, even when tilted: the warp already accounts for tilt);
+    # the rover drives on bright sand only, so shadowed sand is an obstacle here
     nav_cells = grid == _LABEL_NAV
-    obs_cells = grid == _LABEL_OBSTACLE
+    obs_cells = (grid == _LABEL_OBSTACLE) | (grid == _LABEL_SHADE)
     rover.nav_angles = _GRID_ANGLE[nav_cells]
     rover.nav_dists = _GRID_DIST[nav_cells]
     rover.obs_angles = _GRID_ANGLE[obs_cells]
@@ -575,8 +653,11 @@ def perception_step(rover):
     rover.rocks_world = rocks_from_memory(mem)
     if getattr(rover, "worldmap", None) is not mem.worldmap or mem.worldmap is None:
         mem.worldmap = render_worldmap(mem)  # first frame, or someone replaced the array: full rebuild
+        mem.drive_worldmap = render_worldmap(mem, drive=True)
     elif window is not None or rover.rocks_world != mem.drawn_rocks:
         render_worldmap(mem, mem.worldmap, window if window is not None else (0, 0, 0, 0))
+        if window is not None:
+            render_worldmap(mem, mem.drive_worldmap, window, drive=True)
     rover.worldmap = mem.worldmap
-    rover.vision_image = _overlay_u8(img, nav8, rock8)
+    rover.vision_image = _overlay_u8(img, nav8, rock8, shade8)
     return rover

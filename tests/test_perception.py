@@ -197,3 +197,51 @@ def test_bool_and_uint8_masks_give_the_same_grid():
     assert (g_bool == 2).sum() > 1000
     x, y = P.rover_coords(nav_bool)
     assert x.size == nav_bool.sum() and np.all(x > 0.5)
+
+
+def _noisy(colour, sd, shape=(30, 60), seed=0):
+    """A patch whose brightness varies with spread `sd` (red units), hue kept: texture, not tint."""
+    rng = np.random.default_rng(seed)
+    colour = np.array(colour, np.float64)
+    gain = 1.0 + rng.normal(0.0, sd / colour[0], shape)[..., None]
+    return np.clip(colour * gain, 0, 255).astype(np.uint8)
+
+
+def test_sand_in_shadow_is_found_but_slope_feet_rough_rock_walls_and_sky_are_not():
+    img = _synthetic(sand_from_row=90)
+    img[100:130, 0:60] = _noisy((150, 140, 128), 2.0)  # sand in shadow: dim, grey-beige, smooth
+    img[100:130, 60:120] = _noisy((150, 120, 100), 2.0)  # slope foot: too red
+    img[100:130, 120:180] = _noisy((150, 140, 128), 25.0, seed=1)  # rough rock of sand colour: textured
+    img[100:130, 180:240] = _noisy((95, 85, 78), 2.0)  # wall in shadow: too dark
+    img[20:50, 0:60] = _noisy((150, 140, 128), 2.0)  # sand colour high in the frame: never floor
+    shade = P.shadowed_sand_mask(img)
+    assert shade.shape == (160, 320) and shade.dtype == bool
+    assert shade[102:128, 2:58].mean() > 0.95
+    for cols in ((62, 118), (122, 178), (182, 238)):
+        assert shade[102:128, cols[0]:cols[1]].mean() < 0.1, cols
+    assert not shade[:P.SHADE_SAND_FIRST_ROW].any()
+    assert not (shade & P.navigable_mask(img)).any()  # light sand is the classic class, not this one
+    assert not (shade & P.rock_mask(img)).any()
+
+
+def test_sand_in_shadow_is_mapped_but_not_driven_on():
+    img = _synthetic(sand_from_row=85)
+    img[85:, :150] = _noisy((150, 140, 128), 2.0, shape=(75, 150))  # the left of the view is in shadow
+    r = _rover(img, pos=(100.0, 100.0), yaw=0.0)
+    for _ in range(4):
+        P.perception_step(r)
+    scored = r.worldmap[:, :, 2] > 0
+    drive = P.drive_map(r)
+    driven = drive[:, :, 2] > 0
+    assert driven.any() and not (driven & ~scored).any()  # the drive map is the stricter one
+    shaded = scored & ~driven
+    ys, xs = np.nonzero(shaded)
+    assert ys.size >= 10 and ys.min() >= 100 and xs.min() >= 100  # ahead and to the left
+    assert (drive[shaded, 0] == 255).all()  # obstacle on the drive map
+    assert (r.worldmap[shaded, 0] == 0).all()
+    edge = np.arctan((P.CX - 150) / P.FOCAL_PX)  # the shadow ends at column 150
+    assert r.nav_angles.size > 0 and (r.nav_angles < edge + 0.02).all()  # decision sees only the sunlit right
+    assert (r.obs_angles > 0.2).any()
+    left = r.vision_image[120, 40].astype(int)
+    plain = P.vision_overlay(img, P.navigable_mask(img), P.rock_mask(img))[120, 40].astype(int)
+    assert left[0] < plain[0] and left[2] > plain[2]  # drawn half blue, not obstacle red
