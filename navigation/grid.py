@@ -1,7 +1,8 @@
 """Occupancy and travel-cost grids built from the rover's own worldmap.
 
 The planner never sees ground truth: it works on what perception has mapped
-(blue = navigable, red = obstacle) plus the decision layer's memory of cells
+(blue = navigable, red = obstacle; decision hands in `perception.drive_map`, where
+sand in shadow stays obstacle) plus the decision layer's memory of cells
 where the rover got stuck. Costs grow near obstacles so planned paths keep to
 the middle of the canyons, where the rover sees both walls and rarely scrapes.
 """
