@@ -113,12 +113,13 @@ class AutonomyClient:
     """
 
     def __init__(self, ground_truth=None, clock: Callable[[], float] = time.monotonic,
-                 insets: bool = True, perception_step=None, decision_step=None):
+                 insets: bool = True, perception_step=None, decision_step=None, home_by_s=None):
         if perception_step is None or decision_step is None:
             real_perception, real_decision = _default_steps()
             perception_step = perception_step or real_perception
             decision_step = decision_step or real_decision
-        self.rover = RoverState(ground_truth=ground_truth)
+        self.home_by_s = home_by_s  # return deadline handed to every mission's RoverState, s or None
+        self.rover = self._fresh_rover(ground_truth)
         self.clock = clock
         self.insets = insets
         self.perception_step = perception_step
@@ -132,6 +133,11 @@ class AutonomyClient:
         self.step_errors = 0  # exceptions caught from perception/decision/insets
 
     # -- helpers --------------------------------------------------------------
+    def _fresh_rover(self, ground_truth):
+        rover = RoverState(ground_truth=ground_truth)
+        rover.home_by_s = self.home_by_s
+        return rover
+
     def _safe_stop(self):
         s = SAFE_STOP
         return "data", command_payload(s["throttle"], s["brake"], s["steer"])
@@ -169,7 +175,7 @@ class AutonomyClient:
 
     def _new_mission(self, reason: str):
         log.warning("simulator restarted (%s): starting a new mission", reason)
-        self.rover = RoverState(ground_truth=self.rover.ground_truth)
+        self.rover = self._fresh_rover(self.rover.ground_truth)
         self.episodes += 1
 
     # -- the frame ------------------------------------------------------------

@@ -124,6 +124,7 @@ class Inputs:
     near_sample: bool
     picking_up: bool
     samples_remaining: object  # int or None
+    home_by: float = HOME_BY_S  # return deadline for this mission, s (RoverState.home_by_s or HOME_BY_S)
 
 
 @dataclass
@@ -254,8 +255,14 @@ def _read_inputs(rover):
         nav_angles=nav_a, nav_dists=nav_d, obs_angles=obs_a, obs_dists=obs_d,
         rock_angles=rock_a, rock_dists=rock_d,
         near_sample=bool(getattr(rover, "near_sample", False)), picking_up=bool(getattr(rover, "picking_up", False)),
-        samples_remaining=remaining,
+        samples_remaining=remaining, home_by=_home_by(rover),
     )
+
+
+def _home_by(rover):
+    """The rover's own return deadline when it has a usable one (a positive number), else HOME_BY_S."""
+    v = _finite(getattr(rover, "home_by_s", None), HOME_BY_S)
+    return v if v > 0 else HOME_BY_S
 
 
 def _update_memory(rover, nav, s):
@@ -881,7 +888,7 @@ def _should_search(nav, s):
     if nav.path_goal is not None and nav.path_goal[0] == "home":
         return False
     home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
-    return s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS <= HOME_BY_S
+    return s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS <= s.home_by
 
 
 def _should_go_home(rover, nav, s):
@@ -891,7 +898,7 @@ def _should_go_home(rover, nav, s):
     if nav.path_goal is not None and nav.path_goal[0] == "home":
         return True
     home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
-    if s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS > HOME_BY_S:
+    if s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS > s.home_by:
         log.info("time is running out at t=%.1f: going home", s.t)
         return True
     if not nav.explored:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import logging
+import math
 import os
 import queue
 import re
@@ -260,6 +261,8 @@ def load_ground_truth_arg(value):
 
 
 def parse_args(argv=None):
+    from decision import HOME_BY_S
+
     p = argparse.ArgumentParser(description="Autonomy client for the Udacity RoboND rover simulator "
                                             "(start this first, then the simulator in Autonomous mode).")
     p.add_argument("image_folder", nargs="?", default=None,
@@ -273,8 +276,21 @@ def parse_args(argv=None):
     p.add_argument("--save-map", default=None, metavar="PATH.npy",
                    help="write the worldmap (200x200x3 uint8, [y, x]) here every "
                         f"{SAVE_MAP_EVERY_FRAMES} frames and at exit")
+    p.add_argument("--home-by", type=positive_seconds, default=None, metavar="SECONDS",
+                   help="head home so as to arrive by this mission time (default "
+                        f"{HOME_BY_S:.0f}, tuned for a 600 s mission; raise it when time does not matter)")
     p.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ... (default %(default)s)")
     return p.parse_args(argv)
+
+
+def positive_seconds(text):
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
+    return v
 
 
 def main(argv=None) -> int:
@@ -288,7 +304,7 @@ def main(argv=None) -> int:
 
     from autonomy import AutonomyClient
 
-    client = AutonomyClient(ground_truth=load_ground_truth_arg(args.ground_truth))
+    client = AutonomyClient(ground_truth=load_ground_truth_arg(args.ground_truth), home_by_s=args.home_by)
     try:
         listener = eventlet.listen((args.host, args.port))
     except OSError as exc:

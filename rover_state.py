@@ -54,6 +54,7 @@ class RoverState:
         self.send_pickup = False  # ask the simulator to pick up this frame
         self.pickup_sent_at = None  # total_time of the last pickup request
         self.mission_complete = False  # all collected and home
+        self.home_by_s = None  # head home so as to arrive by this mission time, s (None: decision.HOME_BY_S)
 
         # --- scoring / display ---------------------------------------------
         self.ground_truth = ground_truth  # 200x200 uint8 map_bw (255 navigable) or None

@@ -21,7 +21,7 @@ import statistics
 import time
 from pathlib import Path
 
-from sim.cli import add_shadows_option, parse_with_logging
+from sim.cli import add_home_by_option, add_shadows_option, parse_with_logging
 from sim.mission import TIME_LIMIT_S
 
 log = logging.getLogger(__name__)
@@ -71,12 +71,13 @@ def _init_worker(world_spec, quiet=True, shadows=True):
 
 
 def _run_seed(args):
-    seed, time_limit, out = args
+    seed, time_limit, out, home_by = args
     from sim.mission import run_mission
 
     t0 = time.perf_counter()
     try:
-        return run_mission(seed, _WORLD, time_limit, out=Path(out) / f"seed-{seed}", progress=False)
+        return run_mission(seed, _WORLD, time_limit, out=Path(out) / f"seed-{seed}", progress=False,
+                           home_by=home_by)
     except Exception as exc:  # one bad seed must not sink the batch
         logging.getLogger(__name__).exception("seed %d failed", seed)
         return {"seed": seed, "end_reason": f"error: {type(exc).__name__}: {exc}",
@@ -139,17 +140,19 @@ def write_outputs(out: Path, results, summary, meta):
         w.writerow({c: r.get(c) for c in COLUMNS})
     _write_text_atomic(out / "evaluation.csv", buf.getvalue())
     md = (f"# Twin evaluation: world {meta['world']}, shadows {meta.get('shadows', 'on')}, seeds {meta['seeds']}, "
-          f"time limit {meta['time_limit_s']:.0f} s\n\n" + markdown_table(results, summary))
+          f"time limit {meta['time_limit_s']:.0f} s"
+          + (f", client home by {meta['home_by_s']:.0f} s" if meta.get("home_by_s") else "")
+          + "\n\n" + markdown_table(results, summary))
     _write_text_atomic(out / "evaluation.md", md)
     return md
 
 
 def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIMIT_S, out=DEFAULT_OUT,
-             progress=True, shadows=True) -> dict:
+             progress=True, shadows=True, home_by=None) -> dict:
     from tqdm import tqdm
 
     out = Path(out)
-    tasks = [(s, time_limit, str(out)) for s in seeds]
+    tasks = [(s, time_limit, str(out), home_by) for s in seeds]
     jobs = max(1, min(int(jobs), len(tasks)))
     t0 = time.perf_counter()
     results = []
@@ -174,6 +177,7 @@ def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIM
     world_name = next((r.get("world") for r in results if r.get("world")), world_spec)
     meta = {"world": world_name, "seeds": f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0]),
             "count": len(seeds), "shadows": "on" if shadows else "off", "jobs": jobs, "time_limit_s": time_limit,
+            "home_by_s": home_by,
             "wall_s": round(time.perf_counter() - t0, 1)}
     md = write_outputs(out, results, summary, meta)
     return {"meta": meta, "summary": summary, "missions": results, "markdown": md}
@@ -186,6 +190,7 @@ def main(argv=None) -> int:
     p.add_argument("--jobs", type=int, default=DEFAULT_JOBS, help="worker processes")
     p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, help="simulated seconds per mission")
     p.add_argument("--out", default=DEFAULT_OUT)
+    add_home_by_option(p)
     add_shadows_option(p)
     p.add_argument("--no-progress", action="store_true")
     a = parse_with_logging(p, argv)
@@ -203,7 +208,7 @@ def main(argv=None) -> int:
         log.error("%s", exc)
         return 2
     res = evaluate(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress,
-                   shadows=a.shadows == "on")
+                   shadows=a.shadows == "on", home_by=a.home_by)
     log.info("\n%s", res["markdown"])
     log.info("wrote %s/evaluation.{json,csv,md} in %.0f s", a.out, res["meta"]["wall_s"])
     return 0

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.cli import add_shadows_option, parse_with_logging
+from sim.cli import add_home_by_option, add_shadows_option, parse_with_logging
 
 log = logging.getLogger(__name__)
 
@@ -156,6 +156,7 @@ class MissionResult:
     stuck_stretches: list = field(default_factory=list)  # [t, x, y, duration_s] >= STUCK_REPORT_MIN_S
     files: dict = field(default_factory=dict)
     shadows: bool = True  # the twin rendered terrain cast shadows (--shadows on)
+    home_by_s: float | None = None  # the client's return deadline when set (--home-by), s
 
     def as_dict(self):
         return {k: _nan_to_none(v) for k, v in asdict(self).items()}
@@ -226,7 +227,7 @@ def _video_frame(rgb, worldmap):
 
 
 def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None, progress=True,
-                  render=True, client_factory=None):
+                  render=True, client_factory=None, home_by=None):
     """Drive `AutonomyClient` against `RoverTwin` in this process; returns (result dict, worldmap, traj)."""
     from sim.twin import CommandError, RoverTwin
 
@@ -234,7 +235,7 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
         from autonomy import AutonomyClient
 
         def client_factory():
-            return AutonomyClient(ground_truth=world.nav_truth, insets=False)
+            return AutonomyClient(ground_truth=world.nav_truth, insets=False, home_by_s=home_by)
     twin = RoverTwin(world, seed=seed, render=render)
     client = client_factory()
     tel = twin.reset(seed)
@@ -319,8 +320,11 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
 
 
 def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,
-                wire=False, progress=True, render=True, write_files=True) -> dict:
-    """Run, score and (optionally) write mission.json + mission.png; returns the result dict."""
+                wire=False, progress=True, render=True, write_files=True, home_by=None) -> dict:
+    """Run, score and (optionally) write mission.json + mission.png; returns the result dict.
+
+    home_by: the client's return deadline, s (None: its default, decision.HOME_BY_S).
+    """
     from sim.world import World, load_world
 
     world_obj = world if isinstance(world, World) else load_world(world)
@@ -328,14 +332,15 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
         from sim.wire import run_wire_mission
 
         summary = run_wire_mission(world_obj, seed, time_limit=time_limit, record=record,
-                                   progress=progress, render=render)
+                                   progress=progress, render=render, home_by=home_by)
         mode = "wire"
     else:
         summary = run_inprocess(world_obj, seed, time_limit=time_limit, video=video, record=record,
-                                progress=progress, render=render)
+                                progress=progress, render=render, home_by=home_by)
         mode = "inprocess"
     summary["stuck"].close_run()
     result = score(world_obj, seed, mode, summary, time_limit)
+    result.home_by_s = home_by
     if write_files:
         out = Path(out) if out else Path(DEFAULT_OUT_ROOT) / f"mission-seed{seed}"
         tr = summary["twin"].truth
@@ -377,6 +382,7 @@ def main(argv=None) -> int:
     p.add_argument("--video", default=None, help="write camera + map video (mp4)")
     p.add_argument("--record", default=None, help="record a simulator-format log (robot_log.csv + IMG)")
     p.add_argument("--wire", action="store_true", help="run drive_rover.py and talk the real wire protocol")
+    add_home_by_option(p)
     add_shadows_option(p)
     p.add_argument("--no-progress", action="store_true")
     a = parse_with_logging(p, argv)
@@ -387,7 +393,7 @@ def main(argv=None) -> int:
 
         world = with_shadows(load_world(a.world), a.shadows == "on")
         r = run_mission(a.seed, world, a.time_limit, a.out, a.video, a.record, a.wire,
-                        progress=not a.no_progress)
+                        progress=not a.no_progress, home_by=a.home_by)
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2

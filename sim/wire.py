@@ -286,7 +286,7 @@ def _load_client_map(path):
 
 
 def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, render=True,
-                     server_log=None):
+                     server_log=None, home_by=None):
     """Twin over the real protocol against drive_rover.py in a subprocess (lockstep).
 
     The client's worldmap lives in the other process: it is scored only when
@@ -302,6 +302,8 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
     map_dir = tempfile.mkdtemp(prefix="twin-wire-map-")
     map_path = os.path.join(map_dir, "worldmap.npy")
     extra = [CLIENT_MAP_OPTION, map_path] if client_supports_map_dump() else []
+    if home_by is not None:
+        extra += ["--home-by", repr(float(home_by))]
     proc = start_client_server(port, server_log, extra)
     state = {"end": "time limit", "completed": False, "still_home_s": 0.0, "distance": 0.0}
     stuck = StuckMeter()

@@ -271,3 +271,19 @@ def test_normal_progress_is_not_a_restart():
     c.handle_telemetry(telemetry(samples_x="104.56", samples_y="80.78", sample_count="5",
                                  sim_time="0.4000"))
     assert c.episodes == 1
+
+
+def test_return_deadline_reaches_every_mission_and_is_checked_on_the_command_line():
+    import drive_rover
+
+    c = AutonomyClient(perception_step=no_perception, decision_step=boom, insets=False, home_by_s=870.0)
+    assert c.rover.home_by_s == 870.0
+    c.handle_telemetry(telemetry(sim_time="30.0000"))
+    c.handle_telemetry(telemetry(sim_time="0.0000"))  # the simulator restarted: a new RoverState
+    assert c.episodes == 2 and c.rover.home_by_s == 870.0
+    assert AutonomyClient(perception_step=no_perception, decision_step=boom).rover.home_by_s is None
+    assert drive_rover.parse_args(["--home-by", "870"]).home_by == 870.0
+    assert drive_rover.parse_args([]).home_by is None
+    for bad in ("0", "-1", "nan", "inf", "soon"):
+        with pytest.raises(SystemExit):
+            drive_rover.parse_args(["--home-by", bad])

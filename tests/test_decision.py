@@ -234,6 +234,20 @@ def test_goes_home_when_done_and_parks():
     assert r.mission_complete
 
 
+@pytest.mark.parametrize("home_by,expect_home", [
+    (None, False),  # the default deadline (570 s) is far off at t = 300 s
+    (305.0, True),  # 10 m from home, estimated at 1.5 x 10 m / 2 m/s: arrival 307.5 s, too late: leave now
+    (float("nan"), False), ("soon", False), (-5.0, False),  # unusable values: the default applies
+])
+def test_return_deadline_comes_from_the_rover_when_it_has_a_usable_one(home_by, expect_home):
+    r = make_rover(pos=(110.0, 85.0), t=300.0)
+    r.home_by_s = home_by
+    r.nav.home = (100.0, 85.0)
+    decision.decision_step(r)
+    heading_home = r.nav.path_goal is not None and r.nav.path_goal[0] == "home"
+    assert heading_home == expect_home  # (its mode may read "stop" while it turns round)
+
+
 def test_spinning_twice_at_one_place_backs_off_then_drives_ahead():
     """A rover wedged tail-first can neither reverse nor turn in place: the second try pulls away forward."""
     nav = decision.NavMemory()
