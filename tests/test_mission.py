@@ -97,7 +97,7 @@ def test_evaluate_runs_seeds_on_two_workers(tmp_path):
 
     proc = subprocess.run([sys.executable, "-m", "sim.evaluate", "--seeds", "0-1", "--world", "procedural:0",
                            "--jobs", "2", "--time-limit", "1", "--out", str(tmp_path), "--no-progress",
-                           "--shadows", "off"],
+                           "--shadows", "off", "--home-by", "870"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "leaked" not in proc.stderr, "worker processes were killed instead of joined"
@@ -106,6 +106,8 @@ def test_evaluate_runs_seeds_on_two_workers(tmp_path):
     assert all("mapped_pct" in m for m in res["missions"]), res["missions"]
     assert res["meta"]["shadows"] == "off" and not any(m["shadows"] for m in res["missions"])
     assert "shadows off" in (tmp_path / "evaluation.md").read_text()
+    assert res["meta"]["home_by_s"] == 870.0 and all(m["home_by_s"] == 870.0 for m in res["missions"])
+    assert "client home by 870 s" in (tmp_path / "evaluation.md").read_text()
     for name in ("evaluation.json", "evaluation.csv", "evaluation.md"):
         assert (tmp_path / name).stat().st_size > 0
     assert (tmp_path / "seed-1" / "mission.png").exists()
