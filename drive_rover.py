@@ -261,8 +261,6 @@ def load_ground_truth_arg(value):
 
 
 def parse_args(argv=None):
-    from decision import HOME_BY_S
-
     p = argparse.ArgumentParser(description="Autonomy client for the Udacity RoboND rover simulator "
                                             "(start this first, then the simulator in Autonomous mode).")
     p.add_argument("image_folder", nargs="?", default=None,
@@ -276,11 +274,19 @@ def parse_args(argv=None):
     p.add_argument("--save-map", default=None, metavar="PATH.npy",
                    help="write the worldmap (200x200x3 uint8, [y, x]) here every "
                         f"{SAVE_MAP_EVERY_FRAMES} frames and at exit")
-    p.add_argument("--home-by", type=positive_seconds, default=None, metavar="SECONDS",
-                   help="head home so as to arrive by this mission time (default "
-                        f"{HOME_BY_S:.0f}, tuned for a 600 s mission; raise it when time does not matter)")
+    add_home_by_option(p)
     p.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ... (default %(default)s)")
     return p.parse_args(argv)
+
+
+def add_home_by_option(parser: argparse.ArgumentParser):
+    """--home-by SECONDS, the client's return deadline; the twin's tools offer the same option."""
+    from decision import HOME_BY_S
+
+    parser.add_argument("--home-by", type=positive_seconds, default=None, metavar="SECONDS",
+                        help=f"head home so as to arrive by this mission time (default {HOME_BY_S:.0f} s, "
+                             "tuned for a 600 s mission; raise it when time does not matter, "
+                             "e.g. 870 with a 900 s twin --time-limit)")
 
 
 def positive_seconds(text):

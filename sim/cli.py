@@ -19,12 +19,3 @@ def add_shadows_option(parser: argparse.ArgumentParser):
                         help="terrain cast shadows as at the simulator's Simple..Fantastic quality (on, "
                              "as in test_dataset) or none as at Fastest/Fast (off, as in the megalphian drive)")
 
-
-def add_home_by_option(parser: argparse.ArgumentParser):
-    """--home-by SECONDS: the client's return deadline (drive_rover.py's option of the same name)."""
-    from decision import HOME_BY_S
-    from drive_rover import positive_seconds
-
-    parser.add_argument("--home-by", type=positive_seconds, default=None, metavar="SECONDS",
-                        help=f"client heads home so as to arrive by this mission time (default: its own, "
-                             f"{HOME_BY_S:.0f} s for a 600 s mission; e.g. 870 with --time-limit 900)")

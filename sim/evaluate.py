@@ -21,7 +21,8 @@ import statistics
 import time
 from pathlib import Path
 
-from sim.cli import add_home_by_option, add_shadows_option, parse_with_logging
+from drive_rover import add_home_by_option
+from sim.cli import add_shadows_option, parse_with_logging
 from sim.mission import TIME_LIMIT_S
 
 log = logging.getLogger(__name__)

@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.cli import add_home_by_option, add_shadows_option, parse_with_logging
+from drive_rover import add_home_by_option
+from sim.cli import add_shadows_option, parse_with_logging
 
 log = logging.getLogger(__name__)
 
