@@ -55,7 +55,8 @@ SHADE_SAND_MIN_R = 130  # red at least this (walls and rock faces in shadow are 
 SHADE_SAND_MIN_G_PER_R = 0.90  # green / red at least this (slope feet and rock faces are redder)
 SHADE_SAND_MIN_B_PER_R = 0.83  # blue / red at least this (gold samples and brown rock have little blue)
 SHADE_SAND_MAX_SD = 10.0  # red standard deviation in the window at most this (rough rock is textured), 0..255
-SHADE_SAND_WINDOW_PX = 5  # square window for that texture test, px
+SHADE_SAND_WINDOW_W_PX = 7  # width of the window for that texture test, px
+SHADE_SAND_WINDOW_H_PX = 1  # its height, px: one row, so it never straddles the floor/wall edge, which runs across
 SHADE_SAND_FIRST_ROW = 60  # rows above this are never floor within map range, px
 ROCK_RGB_MIN = (110, 90, 0)  # sample rocks are gold (1, 0.85, 0): bright R and G ...
 ROCK_RGB_MAX = (255, 255, 60)  # ... and little blue
@@ -75,7 +76,8 @@ MAP_RANGE_M = 9.0  # only ground within this distance votes, m
 MAP_RANGE_FALLOFF = 0.5  # vote weight at MAP_RANGE_M relative to 1 at the rover (linear), 0..1
 NAV_VOTE_WEIGHT = 1.0  # weight of one navigable top-down cell vote
 OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
-NAV_MAJORITY = 0.2  # a map cell shows navigable when nav share of votes exceeds this, 0..1 (edge cells are mixed)
+NAV_MAJORITY = 0.2  # a map cell shows navigable when the light-sand share of votes exceeds this, 0..1 (edge cells are mixed)
+SHADE_MAJORITY = 0.5  # ...or when light plus shadowed sand make up more than this share (the weaker evidence), 0..1
 MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 
@@ -140,7 +142,7 @@ def shadowed_sand_u8(rgb: np.ndarray) -> np.ndarray:
     colour = ((red >= SHADE_SAND_MIN_R)
               & (sub[:, :, 1] >= SHADE_SAND_MIN_G_PER_R * red)
               & (sub[:, :, 2] >= SHADE_SAND_MIN_B_PER_R * red))
-    k = (SHADE_SAND_WINDOW_PX, SHADE_SAND_WINDOW_PX)
+    k = (SHADE_SAND_WINDOW_W_PX, SHADE_SAND_WINDOW_H_PX)
     mean = cv2.boxFilter(red, -1, k, borderType=cv2.BORDER_REFLECT)
     mean_sq = cv2.boxFilter(red * red, -1, k, borderType=cv2.BORDER_REFLECT)
     smooth = (mean_sq - mean * mean) <= SHADE_SAND_MAX_SD ** 2
@@ -402,10 +404,10 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
     y0, y1, x0, x1 = (0, WORLD_SIZE, 0, WORLD_SIZE) if window is None else window
     nav = mem.nav_votes[y0:y1, x0:x1]
     total = nav + mem.obs_votes[y0:y1, x0:x1]
-    if not drive:
-        nav = nav + mem.shade_votes[y0:y1, x0:x1]
     seen = total >= MIN_CELL_VOTES
     is_nav = seen & (nav > NAV_MAJORITY * total)
+    if not drive:
+        is_nav |= seen & (nav + mem.shade_votes[y0:y1, x0:x1] > SHADE_MAJORITY * total)
     out[y0:y1, x0:x1, 2] = is_nav.view(np.uint8) * np.uint8(255)
     out[y0:y1, x0:x1, 0] = (seen & ~is_nav).view(np.uint8) * np.uint8(255)
     if drive:

@@ -2,7 +2,9 @@
 
 The megalphian drive (6,150 frames over ~97 % of the canyon) was recorded without cast
 shadows; with --shadows off the twin's frames at its poses must map within a couple of
-points of the real frames, and with shadows on the twin must be the harder of the two.
+points of the real frames.  With shadows on, the twin's frames are the harder case (edge sand
+in cast shadow is darker than the light-sand threshold), and the shadowed-sand rule must win
+that back: the map must not fall more than a couple of points behind the real frames either.
 """
 import pytest
 
@@ -39,10 +41,12 @@ def test_twin_without_shadows_maps_like_the_real_frames(megalphian, real_world):
     assert real_map.shape == twin_map.shape == (200, 200, 3)
 
 
-def test_twin_with_shadows_is_the_harder_case(megalphian, real_world):
+def test_shadowed_sand_rule_maps_the_shadowed_twin_like_the_real_frames(megalphian, real_world):
     on, _, _ = map_realism.compare(megalphian, real_world, STRIDE)
     assert on.shadows == "on"
-    assert on.mapped_gap < -2.0, on  # shaded edge sand reads as wall
+    # before the one-row texture window and the shadowed-sand majority this gap was -5.5 points
+    assert on.mapped_gap >= -MAX_GAP_SHADOWS_OFF, on
+    assert abs(on.twin_fidelity_pct - on.real_fidelity_pct) <= MAX_FIDELITY_GAP, on
 
 
 def test_find_log_errors_clearly(tmp_path):

@@ -245,3 +245,40 @@ def test_sand_in_shadow_is_mapped_but_not_driven_on():
     left = r.vision_image[120, 40].astype(int)
     plain = P.vision_overlay(img, P.navigable_mask(img), P.rock_mask(img))[120, 40].astype(int)
     assert left[0] < plain[0] and left[2] > plain[2]  # drawn half blue, not obstacle red
+
+
+def test_sand_in_shadow_right_under_a_wall_is_found():
+    # the shadowed floor meets a dark wall along an image row (as it does at every canyon edge);
+    # the texture test must not count the wall above as roughness of the sand below it
+    img = np.full((160, 320, 3), 40, np.uint8)
+    img[:92] = _noisy((45, 38, 34), 8.0, shape=(92, 320))  # dark, textured wall
+    img[92:] = _noisy((150, 140, 128), 2.0, shape=(68, 320))  # sand in shadow from row 92 down
+    shade = P.shadowed_sand_mask(img)
+    assert shade[92:94].mean() > 0.95  # the two rows touching the wall
+    assert not shade[:92].any()
+
+
+def _memory_with_votes(light, shade, dark):
+    """A one-cell map (cell (100, 100)) with the given weighted votes; shade counts among obstacle votes."""
+    mem = P.PerceptionMemory()
+    mem.nav_votes[100, 100] = light
+    mem.shade_votes[100, 100] = shade
+    mem.obs_votes[100, 100] = shade + dark
+    return mem
+
+
+@pytest.mark.parametrize("light, shade, dark, scored_nav, drive_nav", [
+    (30, 0, 70, True, True),  # light sand share 0.3 > NAV_MAJORITY: navigable on both maps
+    (10, 30, 60, False, False),  # 0.4 light + shadowed: not enough of the weaker evidence
+    (10, 45, 45, True, False),  # 0.55 light + shadowed: floor on the scored map, not driven on
+    (0, 10, 0, True, False),  # all shadowed sand
+    (0, 0, 1, False, False),  # too few votes to show anything
+])
+def test_scored_map_needs_a_majority_of_shadowed_sand_but_drive_map_ignores_it(light, shade, dark, scored_nav,
+                                                                               drive_nav):
+    mem = _memory_with_votes(light, shade, dark)
+    scored = P.render_worldmap(mem)[100, 100]
+    drive = P.render_worldmap(mem, drive=True)[100, 100]
+    assert (scored[2] == 255) == scored_nav and (drive[2] == 255) == drive_nav
+    seen = light + shade + dark >= P.MIN_CELL_VOTES
+    assert (scored[0] == 255) == (seen and not scored_nav)
