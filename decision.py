@@ -15,8 +15,9 @@ Modes (one handler function each):
   cells ahead are remembered as blocked so the planner avoids them;
 - sample:  approach a seen (camera) or remembered (map) sample rock slowly;
 - pickup:  stop, request the pickup once when near_sample and stopped, wait;
-- search:  map complete but samples missing: visit mapped floor far from
-  the trail (pockets at the arms' tips hide samples);
+- search:  map complete but samples missing: peek into shadowed floor the
+  camera never saw from close (dark pockets hide small samples), then visit
+  mapped floor far from the trail (pockets at the arms' tips);
 - home:    plan back to the start and stop there;
 - done:    parked at home with everything collected (or time is up).
 
@@ -103,6 +104,7 @@ COLLECT_DEBOUNCE_S = 3.0  # pickup-finished and count-dropped within this time a
 # --- mission -----------------------------------------------------------------------------
 HOME_STOP_M = 1.5  # parked when this close to the start, m
 HOME_BY_S = 570.0  # head home when the estimated arrival would be later than this, s
+SEARCH_HOME_BY_S = 870.0  # ...stretched to this while samples are missing and there is still ground to search, s
 HOME_SPEED_ESTIMATE_MPS = 2.0  # speed used to estimate the time to get home, m/s
 SECOND_SWEEP = True  # with samples missing and no frontier left, clear ignored frontiers once
 
@@ -125,6 +127,7 @@ class Inputs:
     picking_up: bool
     samples_remaining: object  # int or None
     home_by: float = HOME_BY_S  # return deadline for this mission, s (RoverState.home_by_s or HOME_BY_S)
+    home_by_given: bool = False  # the deadline was set for this mission (RoverState.home_by_s): never stretch it
 
 
 @dataclass
@@ -255,7 +258,7 @@ def _read_inputs(rover):
         nav_angles=nav_a, nav_dists=nav_d, obs_angles=obs_a, obs_dists=obs_d,
         rock_angles=rock_a, rock_dists=rock_d,
         near_sample=bool(getattr(rover, "near_sample", False)), picking_up=bool(getattr(rover, "picking_up", False)),
-        samples_remaining=remaining, home_by=_home_by(rover),
+        samples_remaining=remaining, home_by=_home_by(rover), home_by_given=_finite(getattr(rover, "home_by_s", None)) > 0,
     )
 
 
@@ -263,6 +266,16 @@ def _home_by(rover):
     """The rover's own return deadline when it has a usable one (a positive number), else HOME_BY_S."""
     v = _finite(getattr(rover, "home_by_s", None), HOME_BY_S)
     return v if v > 0 else HOME_BY_S
+
+
+def _deadline(nav, s):
+    """The return deadline now: a given one as it is; the default stretches to SEARCH_HOME_BY_S
+    while samples are missing and the search still has places to visit (a sample is worth
+    more than five minutes; once the search has run out, a complete map sends the rover home)."""
+    missing = s.samples_remaining is not None and s.samples_remaining > 0
+    if not s.home_by_given and missing and nav.search_left:
+        return SEARCH_HOME_BY_S
+    return s.home_by
 
 
 def _update_memory(rover, nav, s):
@@ -535,14 +548,17 @@ def mode_forward(rover, nav, s):
 
 
 def mode_search(rover, nav, s):
-    """Map complete, samples missing: visit mapped floor far from the trail; None when nothing is left."""
-    if nav.path_goal is None or nav.path_goal[0] != "search" or _needs_replan(nav, s):
+    """Map complete, samples missing: peek into shadowed pockets, then visit mapped floor far from
+    the trail; None when nothing is left."""
+    if nav.path_goal is None or nav.path_goal[0] not in ("peek", "search") or _needs_replan(nav, s):
         _plan_search(rover, nav, s)
     if not nav.search_left or nav.path_goal is None or len(nav.path_xy) < 2:
         return None
-    goal_xy = grid.cell_to_world(*nav.path_goal[1])
+    kind, goal = nav.path_goal
+    goal_xy = grid.cell_to_world(*goal)
     if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M or _goal_stalled(nav, s):
-        explore.ignore_disc(nav.search_done, nav.path_goal[1], explore.SEARCH_MIN_AWAY_M)
+        radius = explore.PEEK_DONE_M if kind == "peek" else explore.SEARCH_MIN_AWAY_M
+        explore.ignore_disc(nav.search_done, goal, radius)
         nav.plan_time = -math.inf
     return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
 
@@ -795,13 +811,29 @@ def _plan_search(rover, nav, s):
     cell = grid.world_to_cell(s.pos)
     _open_around_rover(cost, cell)
     dist, parent = astar.distance_field(cost, cell)
-    goal = explore.search_target(free, nav.visits.visited(), nav.search_done, dist)
+    kind, goal = "peek", _peek_goal(rover, nav, s, free, dist)
+    if goal is None:
+        kind, goal = "search", explore.search_target(free, nav.visits.visited(), nav.search_done, dist)
     if goal is None:
         nav.search_left = False
         log.info("sample search finished at t=%.1f", s.t)
         _set_path(nav, s, "search", None, [])
         return
-    _set_path(nav, s, "search", goal, astar.path_to(parent, cost.shape, goal))
+    if nav.path_goal is None or nav.path_goal != (kind, goal):
+        log.info("sample search: %s at %s from (%.1f, %.1f), t=%.1f", kind, goal, s.pos[0], s.pos[1], s.t)
+    _set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
+
+
+def _peek_goal(rover, nav, s, free, dist):
+    """Best shadowed pocket to look into (see explore.peek_targets) on perception's scored map, or None."""
+    scored = getattr(rover, "worldmap", None)
+    if not isinstance(scored, np.ndarray) or scored.shape != (grid.GRID_SIZE, grid.GRID_SIZE, 3):
+        return None
+    shadow_floor = (scored[:, :, 2] > 0) & ~free
+    looked = perception.looked_at_within(rover, explore.PEEK_RANGE_M)
+    targets = explore.peek_targets(free, shadow_floor, looked, nav.search_done, dist)
+    current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "peek" else None
+    return explore.choose_target(targets, s.pos, s.yaw, current)
 
 
 def _plan_to(rover, nav, s, kind, goal):
@@ -888,7 +920,7 @@ def _should_search(nav, s):
     if nav.path_goal is not None and nav.path_goal[0] == "home":
         return False
     home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
-    return s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS <= s.home_by
+    return s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS <= _deadline(nav, s)
 
 
 def _should_go_home(rover, nav, s):
@@ -898,7 +930,7 @@ def _should_go_home(rover, nav, s):
     if nav.path_goal is not None and nav.path_goal[0] == "home":
         return True
     home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
-    if s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS > s.home_by:
+    if s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS > _deadline(nav, s):
         log.info("time is running out at t=%.1f: going home", s.t)
         return True
     if not nav.explored:

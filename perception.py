@@ -80,6 +80,7 @@ NAV_MAJORITY = 0.2  # a map cell shows navigable when the light-sand share of vo
 SHADE_MAJORITY = 0.5  # ...or when light plus shadowed sand make up more than this share (the weaker evidence), 0..1
 MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
+LOOK_RANGE_MAX_M = 4.0  # the closest-look map (how near the camera has seen each cell) records looks up to this, m
 
 # --- rocks ---
 ROCK_MAX_RANGE_M = 9.0  # rock detections farther than this are not remembered, m
@@ -290,7 +291,7 @@ def world_to_rover(xw, yw, xpos, ypos, yaw_deg, scale=1.0):
 def _build_tables():
     """Precompute the top-down grid geometry (call again after changing grid/map constants)."""
     global _GRID_ROWS, _GRID_COLS, _GRID_X, _GRID_Y, _GRID_DIST, _GRID_ANGLE, _GRID_USABLE
-    global _GRID_USABLE_U8, _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _HORIZON_ROW, _LEVEL_H
+    global _GRID_USABLE_U8, _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _MAP_DIST, _MAP_LOOK, _HORIZON_ROW, _LEVEL_H
     _GRID_ROWS = int(round(GRID_FORWARD_M / GRID_RES_M))
     _GRID_COLS = int(round(2 * GRID_HALF_WIDTH_M / GRID_RES_M))
     _GRID_X = (np.arange(_GRID_ROWS)[:, None] + 0.5) * GRID_RES_M + np.zeros((1, _GRID_COLS))  # fwd, m
@@ -304,6 +305,8 @@ def _build_tables():
     _MAP_X = _GRID_X.ravel()[_MAP_CELLS]
     _MAP_Y = _GRID_Y.ravel()[_MAP_CELLS]
     _MAP_WEIGHT = 1.0 - (1.0 - MAP_RANGE_FALLOFF) * dist.ravel()[_MAP_CELLS] / MAP_RANGE_M
+    _MAP_DIST = dist.ravel()[_MAP_CELLS].astype(np.float32)
+    _MAP_LOOK = _MAP_DIST <= LOOK_RANGE_MAX_M  # voting cells that also update the closest-look map
     _HORIZON_ROW = int(math.floor(CY))  # rows above this never see the floor of a level camera
     _LEVEL_H = ground_homography(0.0, 0.0)
 
@@ -339,6 +342,9 @@ class PerceptionMemory:
     frames_seen, frames_mapped: counters (mapped = passed the tilt gate).
     shade_votes: float32 (200, 200); the part of obs_votes that was sand in shadow.  The
         scored ``rover.worldmap`` counts it as navigable, the drive map as obstacle.
+    look_range: float32 (200, 200); the closest range (m) from which the camera has seen
+        each cell (inf: never within LOOK_RANGE_MAX_M).  Small samples only show from close
+        by, so the sample search reads it through :func:`looked_at_within`.
     last_grid: uint8 top-down label grid of the last frame (0 unknown, 1 obstacle, 2 navigable,
         3 sand in shadow),
         rows = forward distance (row i at (i + 0.5) * GRID_RES_M), cols = lateral (left at high j).
@@ -346,6 +352,7 @@ class PerceptionMemory:
     nav_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     obs_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     shade_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
+    look_range: np.ndarray = field(default_factory=lambda: np.full((WORLD_SIZE, WORLD_SIZE), np.inf, np.float32))
     rock_clusters: List[list] = field(default_factory=list)
     frames_seen: int = 0
     frames_mapped: int = 0
@@ -377,6 +384,11 @@ def occupancy_grids(rover) -> Tuple[np.ndarray, np.ndarray]:
         nav = np.where(total > 0, mem.nav_votes / total, 0.0) * certainty
         obs = np.where(total > 0, mem.obs_votes / total, 0.0) * certainty
     return nav.astype(np.float32), obs.astype(np.float32)
+
+
+def looked_at_within(rover, range_m: float) -> np.ndarray:
+    """bool (200, 200) [y, x]: cells the camera has seen from no farther than range_m (<= LOOK_RANGE_MAX_M)."""
+    return get_memory(rover).look_range <= range_m
 
 
 def drive_map(rover) -> np.ndarray:
@@ -597,6 +609,8 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
         y1 - y0, w_cols)
     mem.obs_votes[y0:y1, x0:x1] += np.bincount(local[~is_nav], w[~is_nav] * OBS_VOTE_WEIGHT, size).reshape(
         y1 - y0, w_cols)
+    near = _MAP_LOOK[known_idx]
+    np.minimum.at(mem.look_range, (iy[near], ix[near]), _MAP_DIST[known_idx[near]])
     return y0, y1, x0, x1
 
 

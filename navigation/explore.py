@@ -26,6 +26,11 @@ CIRCLE_MAX_SPAN_M = 10.0  # ...while staying within a box this size, m
 SEEN_CLOSE_M = 7.0  # a mapped obstacle counts as confirmed once the camera looked at it from this close, m
 SEEN_HALF_FOV_DEG = 45.0  # ...within this half-angle of the heading, degrees
 SEARCH_MIN_AWAY_M = 4.0  # sample search visits mapped floor at least this far from the trail, m
+PEEK_RANGE_M = 3.0  # the smallest sample shows in the camera from about this close, m
+PEEK_MIN_CELLS = 3  # shadowed-floor clusters smaller than this are not worth a peek, cells
+PEEK_MIN_DEPTH_M = 2.0  # ...nor those not reaching this far from sunlit floor (a shadowed fringe along a wall), m
+PEEK_MAX_DEPTH_M = 3.5  # the rover peeks no deeper into shadow than this (dark slots are traps; 3 m more are seen), m
+PEEK_DONE_M = 1.5  # a reached peek target rules out the shadowed floor this close to it, m
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
@@ -79,10 +84,11 @@ def frontier_mask(free, unknown, ignored=None, obstacle=None, seen_close=None):
     return mask
 
 
-def frontier_targets(mask, dist):
+def frontier_targets(mask, dist, min_cells=FRONTIER_MIN_CELLS):
     """Reachable frontier clusters as a structured list: one (row, col, path_cost, size) per cluster.
 
-    The target cell of a cluster is its cell with the lowest path cost.
+    The target cell of a cluster is its cell with the lowest path cost; clusters under
+    `min_cells` cells are left out.
     """
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     rows, cols = np.nonzero(mask)
@@ -90,7 +96,7 @@ def frontier_targets(mask, dist):
         return np.zeros((0, 4))
     lab = labels[rows, cols]
     d = dist[rows, cols]
-    ok = np.isfinite(d) & (stats[lab, cv2.CC_STAT_AREA] >= FRONTIER_MIN_CELLS)
+    ok = np.isfinite(d) & (stats[lab, cv2.CC_STAT_AREA] >= min_cells)
     if not ok.any():
         return np.zeros((0, 4))
     rows, cols, lab, d = rows[ok], cols[ok], lab[ok], d[ok]
@@ -135,6 +141,41 @@ def ignore_disc(ignored, cell, radius=IGNORE_RADIUS_M):
     """Mark a disc of cells around `cell` as ignored frontier (in place)."""
     cv2.circle(ignored.view(np.uint8), (int(cell[1]), int(cell[0])), int(np.ceil(radius)), 1, -1)
     return ignored
+
+
+def peek_targets(free, shadow_floor, looked, done, dist):
+    """Pockets of shadowed floor beside ground the camera never saw from within PEEK_RANGE_M.
+
+    The drive map keeps the rover off shadowed floor, so exploration never goes there, and
+    pockets in deep shadow (a slot beside a pillar, a narrow inlet) hide small samples that
+    only show from a few metres.  The sample search peeks into them before anything else.
+    A pocket is a cluster of at least PEEK_MIN_CELLS such cells (minus `done` ones) reaching
+    PEEK_MIN_DEPTH_M from sunlit floor (every wall has a thin shadowed fringe); its target is
+    its deepest reachable cell no more than PEEK_MAX_DEPTH_M in (a narrow dark slot is a trap).
+    Returns one (row, col, path_cost, size) per pocket, like frontier_targets.
+    """
+    unlooked = cv2.dilate((~looked).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    mask = shadow_floor & unlooked & ~done
+    mask[0, :] = mask[-1, :] = mask[:, 0] = mask[:, -1] = False
+    if not mask.any():
+        return np.zeros((0, 4))
+    depth = cv2.distanceTransform((~free).astype(np.uint8), cv2.DIST_L2, 3)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    rows, cols = np.nonzero(mask)
+    lab, dep, d = labels[rows, cols], depth[rows, cols], dist[rows, cols]
+    deepest = np.zeros(n, np.float32)
+    np.maximum.at(deepest, lab, dep)
+    ok = ((deepest[lab] >= PEEK_MIN_DEPTH_M) & (stats[lab, cv2.CC_STAT_AREA] >= PEEK_MIN_CELLS)
+          & (dep <= PEEK_MAX_DEPTH_M) & np.isfinite(d))
+    if not ok.any():
+        return np.zeros((0, 4))
+    rows, cols, lab, dep, d = rows[ok], cols[ok], lab[ok], dep[ok], d[ok]
+    order = np.lexsort((d, -dep, lab))  # per pocket: deepest first, then cheapest
+    first = np.ones(order.size, bool)
+    first[1:] = lab[order][1:] != lab[order][:-1]
+    pick = order[first]
+    sizes = stats[lab[pick], cv2.CC_STAT_AREA].astype(np.float64)
+    return np.stack([rows[pick], cols[pick], d[pick], sizes], axis=1).astype(np.float64)
 
 
 def search_target(free, visited, done, dist):

@@ -293,3 +293,27 @@ def test_wedged_turn_in_place_escapes_within_seconds():
 def test_turn_in_place_that_turns_is_not_stuck():
     modes = _turn_toward_frontier_behind(follow_steer=True)
     assert modes[0] == "stop" and "stuck" not in modes
+
+
+@pytest.mark.parametrize("remaining, home_by, expect_home", [
+    (1, None, False),  # a sample is missing: the default deadline stretches to SEARCH_HOME_BY_S
+    (0, None, True),  # all in: the default deadline (570 s) holds
+    (1, 570.0, True),  # a deadline given for the mission never stretches
+])
+def test_default_deadline_stretches_while_samples_are_missing(remaining, home_by, expect_home):
+    r = make_rover(pos=(110.0, 85.0), t=600.0)
+    r.samples_remaining = remaining
+    r.home_by_s = home_by
+    r.nav.home = (100.0, 85.0)
+    decision.decision_step(r)
+    heading_home = r.nav.path_goal is not None and r.nav.path_goal[0] == "home"
+    assert heading_home == expect_home
+
+
+def test_stretched_deadline_ends_when_the_search_has_nowhere_left_to_go():
+    r = make_rover(pos=(110.0, 85.0), t=600.0)
+    r.samples_remaining = 1
+    r.nav.home = (100.0, 85.0)
+    r.nav.search_left = False
+    decision.decision_step(r)
+    assert r.nav.path_goal is not None and r.nav.path_goal[0] == "home"

@@ -238,3 +238,40 @@ def test_paths_go_round_a_field_of_small_rocks_the_map_shows_as_floor():
     around = astar.astar(grid.cost_grid(free, obstacle, rough=rough), start, goal)
     assert any(rough[r, c] > 0 for r, c in straight)
     assert not any(rough[r, c] > 0 for r, c in around)
+
+
+def _pocket_scene():
+    """Sunlit corridor y 95..105, x 40..80; a shadowed inlet y 99..101 running east from x 80 to 88;
+    a shadowed fringe one cell wide along the corridor's north wall.  Returns (free, shadow, dist)."""
+    free = np.zeros((200, 200), bool)
+    free[95:106, 40:80] = True
+    shadow = np.zeros((200, 200), bool)
+    shadow[99:102, 80:88] = True  # the inlet: 8 m deep
+    shadow[106, 45:75] = True  # fringe along the wall
+    cost = grid.cost_grid(free, ~free & ~shadow, soft_obstacles=True)
+    cost[shadow] = 3.0  # shadowed floor: passable, dearer
+    dist, _ = astar.distance_field(cost, (100, 50))
+    return free, shadow, dist
+
+
+def test_peek_targets_the_deepest_shadowed_cell_a_rover_may_enter():
+    free, shadow, dist = _pocket_scene()
+    looked = np.zeros((200, 200), bool)
+    looked[90:111, 35:80] = True  # the corridor and its walls were seen from close, the inlet was not
+    t = explore.peek_targets(free, shadow, looked, np.zeros((200, 200), bool), dist)
+    assert len(t) == 1  # the fringe is too shallow to hide anything the corridor did not show
+    row, col, cost, size = t[0]
+    assert row in (99, 100, 101) and size == 24
+    depth = col + 0.5 - 80  # metres into the shadow from the last sunlit cell (x = 79)
+    assert explore.PEEK_MIN_DEPTH_M <= depth <= explore.PEEK_MAX_DEPTH_M + 1.0  # deep, but not into the trap
+    assert np.isfinite(cost)
+
+
+def test_peek_has_nothing_to_do_once_the_pocket_was_seen_or_searched():
+    free, shadow, dist = _pocket_scene()
+    looked = np.ones((200, 200), bool)
+    assert len(explore.peek_targets(free, shadow, looked, np.zeros((200, 200), bool), dist)) == 0
+    looked[:] = False
+    done = np.zeros((200, 200), bool)
+    done[95:106, 78:90] = True
+    assert len(explore.peek_targets(free, shadow, looked, done, dist)) == 0

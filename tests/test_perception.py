@@ -282,3 +282,19 @@ def test_scored_map_needs_a_majority_of_shadowed_sand_but_drive_map_ignores_it(l
     assert (scored[2] == 255) == scored_nav and (drive[2] == 255) == drive_nav
     seen = light + shade + dark >= P.MIN_CELL_VOTES
     assert (scored[0] == 255) == (seen and not scored_nav)
+
+
+def test_closest_look_map_records_how_near_the_camera_saw_each_cell():
+    r = _rover(_synthetic(sand_from_row=84), pos=(100.0, 100.0), yaw=0.0)
+    P.perception_step(r)
+    rng = P.get_memory(r).look_range
+    assert np.isinf(rng[100, 99])  # behind the rover: never in view
+    assert np.isfinite(rng[100, 102]) and rng[100, 102] <= 3.0  # 2-3 m ahead
+    assert np.isinf(rng[100, 106])  # 6 m ahead: seen, but not from within LOOK_RANGE_MAX_M
+    near = P.looked_at_within(r, 3.0)
+    assert near.dtype == bool and near[100, 102] and not near[100, 104]
+    before = float(rng[100, 102])
+    r.pos = (103.0, 100.0)  # drive 3 m on: the far cells are now close
+    P.perception_step(r)
+    assert P.get_memory(r).look_range[100, 106] <= 3.5
+    assert P.get_memory(r).look_range[100, 102] == before  # now behind the rover: it keeps its closest look
