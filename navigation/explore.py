@@ -84,11 +84,10 @@ def frontier_mask(free, unknown, ignored=None, obstacle=None, seen_close=None):
     return mask
 
 
-def frontier_targets(mask, dist, min_cells=FRONTIER_MIN_CELLS):
+def frontier_targets(mask, dist):
     """Reachable frontier clusters as a structured list: one (row, col, path_cost, size) per cluster.
 
-    The target cell of a cluster is its cell with the lowest path cost; clusters under
-    `min_cells` cells are left out.
+    The target cell of a cluster is its cell with the lowest path cost.
     """
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     rows, cols = np.nonzero(mask)
@@ -96,11 +95,15 @@ def frontier_targets(mask, dist, min_cells=FRONTIER_MIN_CELLS):
         return np.zeros((0, 4))
     lab = labels[rows, cols]
     d = dist[rows, cols]
-    ok = np.isfinite(d) & (stats[lab, cv2.CC_STAT_AREA] >= min_cells)
+    ok = np.isfinite(d) & (stats[lab, cv2.CC_STAT_AREA] >= FRONTIER_MIN_CELLS)
     if not ok.any():
         return np.zeros((0, 4))
     rows, cols, lab, d = rows[ok], cols[ok], lab[ok], d[ok]
-    order = np.lexsort((d, lab))
+    return _first_per_cluster(rows, cols, lab, d, stats, np.lexsort((d, lab)))
+
+
+def _first_per_cluster(rows, cols, lab, d, stats, order):
+    """(row, col, path_cost, size) of each cluster's first cell in `order` (which must group clusters)."""
     first = np.ones(order.size, bool)
     first[1:] = lab[order][1:] != lab[order][:-1]
     pick = order[first]
@@ -170,12 +173,7 @@ def peek_targets(free, shadow_floor, looked, done, dist):
     if not ok.any():
         return np.zeros((0, 4))
     rows, cols, lab, dep, d = rows[ok], cols[ok], lab[ok], dep[ok], d[ok]
-    order = np.lexsort((d, -dep, lab))  # per pocket: deepest first, then cheapest
-    first = np.ones(order.size, bool)
-    first[1:] = lab[order][1:] != lab[order][:-1]
-    pick = order[first]
-    sizes = stats[lab[pick], cv2.CC_STAT_AREA].astype(np.float64)
-    return np.stack([rows[pick], cols[pick], d[pick], sizes], axis=1).astype(np.float64)
+    return _first_per_cluster(rows, cols, lab, d, stats, np.lexsort((d, -dep, lab)))  # deepest, then cheapest
 
 
 def search_target(free, visited, done, dist):
