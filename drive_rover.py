@@ -281,12 +281,12 @@ def parse_args(argv=None):
 
 def add_home_by_option(parser: argparse.ArgumentParser):
     """--home-by SECONDS, the client's return deadline; the twin's tools offer the same option."""
-    from decision import HOME_BY_S
+    from decision import HOME_BY_S, SEARCH_HOME_BY_S
 
     parser.add_argument("--home-by", type=positive_seconds, default=None, metavar="SECONDS",
                         help=f"head home so as to arrive by this mission time (default {HOME_BY_S:.0f} s, "
-                             "tuned for a 600 s mission; raise it when time does not matter, "
-                             "e.g. 870 with a 900 s twin --time-limit)")
+                             f"tuned for a 600 s mission, stretched to {SEARCH_HOME_BY_S:.0f} s while samples "
+                             "are missing and the search has places left; a value given here is never stretched)")
 
 
 def positive_seconds(text):
