@@ -104,7 +104,7 @@ COLLECT_DEBOUNCE_S = 3.0  # pickup-finished and count-dropped within this time a
 # --- mission -----------------------------------------------------------------------------
 HOME_STOP_M = 1.5  # parked when this close to the start, m
 HOME_BY_S = 570.0  # head home when the estimated arrival would be later than this, s
-SEARCH_HOME_BY_S = 870.0  # ...stretched to this while samples are missing and there is still ground to search, s
+SEARCH_HOME_BY_S = 870.0  # ...stretched to this while the map is incomplete or samples are missing and there is ground to search, s
 HOME_SPEED_ESTIMATE_MPS = 2.0  # speed used to estimate the time to get home, m/s
 SECOND_SWEEP = True  # with samples missing and no frontier left, clear ignored frontiers once
 
@@ -270,10 +270,11 @@ def _home_by(rover):
 
 def _deadline(nav, s):
     """The return deadline now: a given one as it is; the default stretches to SEARCH_HOME_BY_S
-    while samples are missing and the search still has places to visit (a sample is worth
-    more than five minutes; once the search has run out, a complete map sends the rover home)."""
+    while the map is not complete, or samples are missing and the search still has places to
+    visit (an unmapped arm or a sample is worth more than five minutes; once both are done, the
+    rover goes home)."""
     missing = s.samples_remaining is not None and s.samples_remaining > 0
-    if not s.home_by_given and missing and nav.search_left:
+    if not s.home_by_given and (not nav.explored or (missing and nav.search_left)):
         return SEARCH_HOME_BY_S
     return s.home_by
 

@@ -295,16 +295,18 @@ def test_turn_in_place_that_turns_is_not_stuck():
     assert modes[0] == "stop" and "stuck" not in modes
 
 
-@pytest.mark.parametrize("remaining, home_by, expect_home", [
-    (1, None, False),  # a sample is missing: the default deadline stretches to SEARCH_HOME_BY_S
-    (0, None, True),  # all in: the default deadline (570 s) holds
-    (1, 570.0, True),  # a deadline given for the mission never stretches
+@pytest.mark.parametrize("remaining, explored, home_by, expect_home", [
+    (1, True, None, False),  # a sample is missing: the default deadline stretches to SEARCH_HOME_BY_S
+    (0, False, None, False),  # all in but the map is not complete: it stretches as well
+    (0, True, None, True),  # all in, map complete: the default deadline (570 s) holds
+    (1, False, 570.0, True),  # a deadline given for the mission never stretches
 ])
-def test_default_deadline_stretches_while_samples_are_missing(remaining, home_by, expect_home):
+def test_default_deadline_stretches_while_samples_or_map_are_missing(remaining, explored, home_by, expect_home):
     r = make_rover(pos=(110.0, 85.0), t=600.0)
     r.samples_remaining = remaining
     r.home_by_s = home_by
     r.nav.home = (100.0, 85.0)
+    r.nav.explored = explored
     decision.decision_step(r)
     heading_home = r.nav.path_goal is not None and r.nav.path_goal[0] == "home"
     assert heading_home == expect_home
@@ -315,5 +317,6 @@ def test_stretched_deadline_ends_when_the_search_has_nowhere_left_to_go():
     r.samples_remaining = 1
     r.nav.home = (100.0, 85.0)
     r.nav.search_left = False
+    r.nav.explored = True
     decision.decision_step(r)
     assert r.nav.path_goal is not None and r.nav.path_goal[0] == "home"
