@@ -285,8 +285,9 @@ def add_home_by_option(parser: argparse.ArgumentParser):
 
     parser.add_argument("--home-by", type=positive_seconds, default=None, metavar="SECONDS",
                         help=f"head home so as to arrive by this mission time (default {HOME_BY_S:.0f} s, "
-                             f"tuned for a 600 s mission, stretched to {SEARCH_HOME_BY_S:.0f} s while samples "
-                             "are missing and the search has places left; a value given here is never stretched)")
+                             f"tuned for a 600 s mission, stretched to {SEARCH_HOME_BY_S:.0f} s while the map is "
+                             "incomplete or samples are missing and the search has places left; a value given "
+                             "here is never stretched)")
 
 
 def positive_seconds(text):
