@@ -275,3 +275,21 @@ def test_peek_has_nothing_to_do_once_the_pocket_was_seen_or_searched():
     done = np.zeros((200, 200), bool)
     done[95:106, 78:90] = True
     assert len(explore.peek_targets(free, shadow, looked, done, dist)) == 0
+
+
+def test_search_goes_to_the_nearest_floor_far_enough_from_the_trail():
+    free = np.zeros((200, 200), bool)
+    free[90:111, 50:151] = True  # a 21 m wide strip
+    visited = np.zeros((200, 200), bool)
+    visited[100, 50:151] = True  # driven along its middle
+    cost = grid.cost_grid(free, ~free)
+    dist, _ = astar.distance_field(cost, (100, 60))
+    done = np.zeros((200, 200), bool)
+    goal = explore.search_target(free, visited, done, dist)
+    assert goal is not None
+    assert abs(goal[0] - 100) >= explore.SEARCH_MIN_AWAY_M, "never on or beside the trail"
+    assert goal[1] < 70, "the nearest such cell by path, not one at the strip's far end"
+    done[:, :120] = True  # searched already
+    assert explore.search_target(free, visited, done, dist)[1] >= 120
+    visited[90:111, 50:151] = True  # every cell driven over: nothing left
+    assert explore.search_target(free, visited, np.zeros((200, 200), bool), dist) is None
