@@ -253,19 +253,21 @@ def _read_inputs(rover):
         remaining = None if remaining is None else int(remaining)
     except (TypeError, ValueError):
         remaining = None
+    home_by = _given_home_by(rover)
     return Inputs(
         t=t, pos=pos, yaw=_finite(getattr(rover, "yaw", 0.0)) % 360.0, vel=_finite(getattr(rover, "vel", 0.0)),
         nav_angles=nav_a, nav_dists=nav_d, obs_angles=obs_a, obs_dists=obs_d,
         rock_angles=rock_a, rock_dists=rock_d,
         near_sample=bool(getattr(rover, "near_sample", False)), picking_up=bool(getattr(rover, "picking_up", False)),
-        samples_remaining=remaining, home_by=_home_by(rover), home_by_given=_finite(getattr(rover, "home_by_s", None)) > 0,
+        samples_remaining=remaining, home_by=HOME_BY_S if home_by is None else home_by,
+        home_by_given=home_by is not None,
     )
 
 
-def _home_by(rover):
-    """The rover's own return deadline when it has a usable one (a positive number), else HOME_BY_S."""
-    v = _finite(getattr(rover, "home_by_s", None), HOME_BY_S)
-    return v if v > 0 else HOME_BY_S
+def _given_home_by(rover):
+    """The rover's own return deadline when it has a usable one (a positive number), else None."""
+    v = _finite(getattr(rover, "home_by_s", None))
+    return v if v > 0 else None
 
 
 def _deadline(nav, s):
@@ -820,7 +822,7 @@ def _plan_search(rover, nav, s):
         log.info("sample search finished at t=%.1f", s.t)
         _set_path(nav, s, "search", None, [])
         return
-    if nav.path_goal is None or nav.path_goal != (kind, goal):
+    if nav.path_goal != (kind, goal):
         log.info("sample search: %s at %s from (%.1f, %.1f), t=%.1f", kind, goal, s.pos[0], s.pos[1], s.t)
     _set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
 
@@ -912,6 +914,12 @@ def _choose_rock(rover, nav, s):
     return False
 
 
+def _home_eta(nav, s):
+    """Estimated arrival time at home if the rover turned back now, s (a margin over the straight line)."""
+    home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
+    return s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS
+
+
 def _should_search(nav, s):
     """After the map is complete, with samples still missing and time left, search the far corners."""
     if not (nav.explored and nav.second_sweep_done and nav.search_left):
@@ -920,8 +928,7 @@ def _should_search(nav, s):
         return False
     if nav.path_goal is not None and nav.path_goal[0] == "home":
         return False
-    home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
-    return s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS <= _deadline(nav, s)
+    return _home_eta(nav, s) <= _deadline(nav, s)
 
 
 def _should_go_home(rover, nav, s):
@@ -930,8 +937,7 @@ def _should_go_home(rover, nav, s):
         return False
     if nav.path_goal is not None and nav.path_goal[0] == "home":
         return True
-    home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
-    if s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS > _deadline(nav, s):
+    if _home_eta(nav, s) > _deadline(nav, s):
         log.info("time is running out at t=%.1f: going home", s.t)
         return True
     if not nav.explored:

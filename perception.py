@@ -304,8 +304,9 @@ def _build_tables():
     _MAP_CELLS = np.flatnonzero(_GRID_USABLE & (dist <= MAP_RANGE_M))  # flat grid indices that vote
     _MAP_X = _GRID_X.ravel()[_MAP_CELLS]
     _MAP_Y = _GRID_Y.ravel()[_MAP_CELLS]
-    _MAP_WEIGHT = 1.0 - (1.0 - MAP_RANGE_FALLOFF) * dist.ravel()[_MAP_CELLS] / MAP_RANGE_M
-    _MAP_DIST = dist.ravel()[_MAP_CELLS].astype(np.float32)
+    map_dist = dist.ravel()[_MAP_CELLS]
+    _MAP_WEIGHT = 1.0 - (1.0 - MAP_RANGE_FALLOFF) * map_dist / MAP_RANGE_M
+    _MAP_DIST = map_dist.astype(np.float32)
     _MAP_LOOK = _MAP_DIST <= LOOK_RANGE_MAX_M  # voting cells that also update the closest-look map
     _HORIZON_ROW = int(math.floor(CY))  # rows above this never see the floor of a level camera
     _LEVEL_H = ground_homography(0.0, 0.0)

@@ -54,27 +54,14 @@ def cell_features(world: World):
     centre = np.mgrid[0:n, 0:n].astype(np.float64) + 0.5
     cy, cx = centre
     floor_centre = world.is_floor(cx, cy)
-    sand_centre = sand_weight_at(world, cx, cy)
+    sand_centre = world.sand_at(cx, cy)
     k = SUB_CELLS
     fine = (np.arange(n * k) + 0.5) / k
     fx, fy = np.meshgrid(fine, fine)
     bright = (np.asarray(world.height_at(fx, fy)) <= FLOOR_TOLERANCE_M) & (
-        sand_weight_at(world, fx, fy) >= BRIGHT_SAND_WEIGHT)
+        world.sand_at(fx, fy) >= BRIGHT_SAND_WEIGHT)
     bright_share = bright.reshape(n, k, n, k).mean(axis=(1, 3))
     return floor_centre, sand_centre, bright_share
-
-
-def sand_weight_at(world: World, x, y):
-    """Bilinear sand-texture weight at world points (texel centres at (i + 0.5) * cell)."""
-    sw = world.sand_weight
-    last = sw.shape[0] - 1
-    fx = np.clip(np.asarray(x) / world.sand_cell_m - 0.5, 0.0, last - 1e-6)
-    fy = np.clip(np.asarray(y) / world.sand_cell_m - 0.5, 0.0, last - 1e-6)
-    c0, r0 = fx.astype(np.int64), fy.astype(np.int64)
-    tx, ty = fx - c0, fy - r0
-    top = sw[r0, c0] * (1 - tx) + sw[r0, c0 + 1] * tx
-    bottom = sw[r0 + 1, c0] * (1 - tx) + sw[r0 + 1, c0 + 1] * tx
-    return top * (1 - ty) + bottom * ty
 
 
 def _as_worldmap(nav: np.ndarray) -> np.ndarray:

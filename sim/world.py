@@ -36,6 +36,18 @@ FLOOR_TOLERANCE_M = 0.05  # a point this close to height 0 counts as floor, m
 DEFAULT_PROCEDURAL_SEED = 0  # seed of the embedded default world
 
 
+def _bilinear(grid: np.ndarray, fx, fy):
+    """Bilinear interpolation of a square grid at fractional (column, row) indices; scalars give a float."""
+    n = grid.shape[0] - 1
+    c0 = np.clip(np.floor(fx).astype(np.int64), 0, n - 1)
+    r0 = np.clip(np.floor(fy).astype(np.int64), 0, n - 1)
+    tx = fx - c0
+    ty = fy - r0
+    out = ((grid[r0, c0] * (1 - tx) + grid[r0, c0 + 1] * tx) * (1 - ty)
+           + (grid[r0 + 1, c0] * (1 - tx) + grid[r0 + 1, c0 + 1] * tx) * ty)
+    return float(out) if np.ndim(out) == 0 else out
+
+
 @dataclass
 class World:
     """Static scene. Arrays are the contract; methods are vectorised conveniences."""
@@ -66,17 +78,16 @@ class World:
     def height_at(self, x, y):
         """Terrain height (m) by bilinear interpolation; scalars or arrays; clamped to the world."""
         x, y = self.clamp_xy(x, y)
-        n = self.terrain_height.shape[0] - 1
-        fx = x / self.terrain_cell_m
-        fy = y / self.terrain_cell_m
-        c0 = np.clip(np.floor(fx).astype(np.int64), 0, n - 1)
-        r0 = np.clip(np.floor(fy).astype(np.int64), 0, n - 1)
-        tx = fx - c0
-        ty = fy - r0
-        h = self.terrain_height
-        out = ((h[r0, c0] * (1 - tx) + h[r0, c0 + 1] * tx) * (1 - ty)
-               + (h[r0 + 1, c0] * (1 - tx) + h[r0 + 1, c0 + 1] * tx) * ty)
-        return float(out) if np.ndim(out) == 0 else out
+        return _bilinear(self.terrain_height, x / self.terrain_cell_m, y / self.terrain_cell_m)
+
+    def sand_at(self, x, y):
+        """Light floor sand weight (0..1) by bilinear interpolation between texel centres, which lie at
+        (i + 0.5) * sand_cell_m; scalars or arrays; clamped to the world."""
+        x, y = self.clamp_xy(x, y)
+        last = self.sand_weight.shape[0] - 1
+        fx = np.clip(x / self.sand_cell_m - 0.5, 0.0, last - 1e-6)
+        fy = np.clip(y / self.sand_cell_m - 0.5, 0.0, last - 1e-6)
+        return _bilinear(self.sand_weight, fx, fy)
 
     def _rock_index(self, x, y):
         x, y = self.clamp_xy(x, y)
