@@ -28,6 +28,7 @@ import logging
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -126,8 +127,7 @@ class Inputs:
     near_sample: bool
     picking_up: bool
     samples_remaining: object  # int or None
-    home_by: float = HOME_BY_S  # return deadline for this mission, s (RoverState.home_by_s or HOME_BY_S)
-    home_by_given: bool = False  # the deadline was set for this mission (RoverState.home_by_s): never stretch it
+    home_by: Optional[float] = None  # return deadline set for this mission (RoverState.home_by_s), s; None: the default
 
 
 @dataclass
@@ -253,14 +253,12 @@ def _read_inputs(rover):
         remaining = None if remaining is None else int(remaining)
     except (TypeError, ValueError):
         remaining = None
-    home_by = _given_home_by(rover)
     return Inputs(
         t=t, pos=pos, yaw=_finite(getattr(rover, "yaw", 0.0)) % 360.0, vel=_finite(getattr(rover, "vel", 0.0)),
         nav_angles=nav_a, nav_dists=nav_d, obs_angles=obs_a, obs_dists=obs_d,
         rock_angles=rock_a, rock_dists=rock_d,
         near_sample=bool(getattr(rover, "near_sample", False)), picking_up=bool(getattr(rover, "picking_up", False)),
-        samples_remaining=remaining, home_by=HOME_BY_S if home_by is None else home_by,
-        home_by_given=home_by is not None,
+        samples_remaining=remaining, home_by=_given_home_by(rover),
     )
 
 
@@ -271,14 +269,14 @@ def _given_home_by(rover):
 
 
 def _deadline(nav, s):
-    """The return deadline now: a given one as it is; the default stretches to SEARCH_HOME_BY_S
+    """The return deadline now: a given one as it is; the default (HOME_BY_S) stretches to SEARCH_HOME_BY_S
     while the map is not complete, or samples are missing and the search still has places to
     visit (an unmapped arm or a sample is worth more than five minutes; once both are done, the
     rover goes home)."""
+    if s.home_by is not None:
+        return s.home_by
     missing = s.samples_remaining is not None and s.samples_remaining > 0
-    if not s.home_by_given and (not nav.explored or (missing and nav.search_left)):
-        return SEARCH_HOME_BY_S
-    return s.home_by
+    return SEARCH_HOME_BY_S if not nav.explored or (missing and nav.search_left) else HOME_BY_S
 
 
 def _update_memory(rover, nav, s):
