@@ -107,6 +107,7 @@ HOME_STOP_M = 1.5  # parked when this close to the start, m
 HOME_BY_S = 570.0  # head home when the estimated arrival would be later than this, s
 SEARCH_HOME_BY_S = 870.0  # ...stretched to this while the map is incomplete or samples are missing and there is ground to search, s
 HOME_SPEED_ESTIMATE_MPS = 2.0  # speed used to estimate the time to get home, m/s
+HOME_DETOUR_FACTOR = 1.5  # the way home is taken to be this many times the straight line, ratio
 SECOND_SWEEP = True  # with samples missing and no frontier left, clear ignored frontiers once
 
 
@@ -913,9 +914,9 @@ def _choose_rock(rover, nav, s):
 
 
 def _home_eta(nav, s):
-    """Estimated arrival time at home if the rover turned back now, s (a margin over the straight line)."""
+    """Estimated arrival time at home if the rover turned back now, s (canyon paths are not straight)."""
     home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
-    return s.t + home_dist * 1.5 / HOME_SPEED_ESTIMATE_MPS
+    return s.t + home_dist * HOME_DETOUR_FACTOR / HOME_SPEED_ESTIMATE_MPS
 
 
 def _should_search(nav, s):
