@@ -51,7 +51,7 @@ CAMERA_HEIGHT_M = CAMERA_MOUNT_UP_M + ROOT_HEIGHT_M  # camera above a flat floor
 # --- colour thresholds (RGB, inclusive) ---
 NAV_RGB_MIN = (161, 161, 161)  # light floor sand: every channel above 160
 # sand in a cast shadow: darker than NAV_RGB_MIN but still sand-coloured (grey-beige) and smooth
-SHADE_SAND_MIN_R = 130  # red at least this (walls and rock faces in shadow are darker), 0..255
+SHADE_SAND_MIN_R = 110  # red at least this (sand light enough to map keeps R >= ~110 in a 0.6 shadow; shadowed walls are darker), 0..255
 SHADE_SAND_MIN_G_PER_R = 0.90  # green / red at least this (slope feet and rock faces are redder)
 SHADE_SAND_MIN_B_PER_R = 0.83  # blue / red at least this (gold samples and brown rock have little blue)
 SHADE_SAND_MAX_SD = 10.0  # red standard deviation in the window at most this (rough rock is textured), 0..255

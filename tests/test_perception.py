@@ -224,6 +224,16 @@ def test_sand_in_shadow_is_found_but_slope_feet_rough_rock_walls_and_sky_are_not
     assert not (shade & P.rock_mask(img)).any()
 
 
+def test_edge_sand_in_deep_shadow_is_found_but_darker_walls_are_not():
+    # canyon-edge sand (weight ~0.8, sunlit ~(202, 183, 170)) under a 0.6 shadow is ~(121, 110, 102)
+    img = _synthetic(sand_from_row=90)
+    img[100:130, 0:100] = _noisy((121, 110, 102), 1.5, shape=(30, 100))
+    img[100:130, 100:200] = _noisy((100, 91, 85), 1.5, shape=(30, 100))  # same hue, darker than sand of mappable weight
+    shade = P.shadowed_sand_mask(img)
+    assert shade[102:128, 2:98].mean() > 0.95
+    assert shade[102:128, 102:198].mean() < 0.05
+
+
 def test_sand_in_shadow_is_mapped_but_not_driven_on():
     img = _synthetic(sand_from_row=85)
     img[85:, :150] = _noisy((150, 140, 128), 2.0, shape=(75, 150))  # the left of the view is in shadow
