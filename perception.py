@@ -79,6 +79,8 @@ OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
 NAV_MAJORITY = 0.2  # a map cell shows navigable when the light-sand share of votes exceeds this, 0..1 (edge cells are mixed)
 SHADE_MAJORITY = 0.5  # ...or when light plus shadowed sand make up more than this share (the weaker evidence), 0..1
 MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
+FILL_MIN_NEIGHBOURS = 5  # a seen cell with at least this many of its 8 neighbours navigable shows navigable too, cells
+FILL_MIN_SAND_SHARE = 0.1  # ...when light plus shadowed sand make up at least this share of its votes, 0..1
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 LOOK_RANGE_MAX_M = 4.0  # the closest-look map (how near the camera has seen each cell) records looks up to this, m
 
@@ -409,18 +411,20 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
                     drive=False) -> np.ndarray:
     """Rebuild the displayed worldmap from the votes (R obstacle, G rock, B navigable).
 
-    ``window`` = (y0, y1, x0, x1) limits the R/B rebuild to the cells whose votes changed.
-    ``drive`` renders the drive map: shadowed sand stays obstacle and rocks are not drawn.
+    ``window`` = (y0, y1, x0, x1) limits the R/B rebuild to the cells whose votes changed
+    (and, on the scored map, their neighbours, whose fill may follow them).
+    ``drive`` renders the drive map: shadowed sand stays obstacle, no fill, no rocks.
     """
     if out is None:
         out = np.zeros((WORLD_SIZE, WORLD_SIZE, 3), np.uint8)
     y0, y1, x0, x1 = (0, WORLD_SIZE, 0, WORLD_SIZE) if window is None else window
-    nav = mem.nav_votes[y0:y1, x0:x1]
-    total = nav + mem.obs_votes[y0:y1, x0:x1]
-    seen = total >= MIN_CELL_VOTES
-    is_nav = seen & (nav > NAV_MAJORITY * total)
-    if not drive:
-        is_nav |= seen & (nav + mem.shade_votes[y0:y1, x0:x1] > SHADE_MAJORITY * total)
+    if drive:
+        seen, is_nav = _majority_navigable(mem, y0, y1, x0, x1, drive=True)
+    elif y1 > y0 and x1 > x0:
+        y0, y1, x0, x1 = max(y0 - 1, 0), min(y1 + 1, WORLD_SIZE), max(x0 - 1, 0), min(x1 + 1, WORLD_SIZE)
+        seen, is_nav = _filled_navigable(mem, y0, y1, x0, x1)
+    else:
+        seen = is_nav = np.zeros((0, 0), bool)
     out[y0:y1, x0:x1, 2] = is_nav.view(np.uint8) * np.uint8(255)
     out[y0:y1, x0:x1, 0] = (seen & ~is_nav).view(np.uint8) * np.uint8(255)
     if drive:
@@ -434,6 +438,36 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
             out[max(iy - h, 0):iy + h + 1, max(ix - h, 0):ix + h + 1, 1] = 255
         mem.drawn_rocks = rocks
     return out
+
+
+def _majority_navigable(mem: PerceptionMemory, y0, y1, x0, x1, drive=False):
+    """(seen, navigable) bool arrays for the window by the vote-share rules alone."""
+    nav = mem.nav_votes[y0:y1, x0:x1]
+    total = nav + mem.obs_votes[y0:y1, x0:x1]
+    seen = total >= MIN_CELL_VOTES
+    is_nav = seen & (nav > NAV_MAJORITY * total)
+    if not drive:
+        is_nav |= seen & (nav + mem.shade_votes[y0:y1, x0:x1] > SHADE_MAJORITY * total)
+    return seen, is_nav
+
+
+def _filled_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
+    """(seen, navigable) for the scored map: the majority rules plus the neighbour fill.
+
+    map_bw's floor edges are smooth; a seen cell that some sand votes for and that floor
+    surrounds on most sides is a notch the votes left, not a wall.
+    """
+    py0, py1, px0, px1 = max(y0 - 1, 0), min(y1 + 1, WORLD_SIZE), max(x0 - 1, 0), min(x1 + 1, WORLD_SIZE)
+    seen, is_nav = _majority_navigable(mem, py0, py1, px0, px1)
+    neighbours = cv2.filter2D(is_nav.view(np.uint8), cv2.CV_16S, _EIGHT_NEIGHBOURS, borderType=cv2.BORDER_CONSTANT)
+    total = mem.nav_votes[py0:py1, px0:px1] + mem.obs_votes[py0:py1, px0:px1]
+    sand = mem.nav_votes[py0:py1, px0:px1] + mem.shade_votes[py0:py1, px0:px1]
+    is_nav = is_nav | (seen & (neighbours >= FILL_MIN_NEIGHBOURS) & (sand >= FILL_MIN_SAND_SHARE * total))
+    inner = (slice(y0 - py0, y0 - py0 + (y1 - y0)), slice(x0 - px0, x0 - px0 + (x1 - x0)))
+    return seen[inner], is_nav[inner]
+
+
+_EIGHT_NEIGHBOURS = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], np.float32)  # kernel counting a cell's neighbours
 
 
 def rocks_from_memory(mem: PerceptionMemory) -> List[Tuple[float, float]]:

@@ -294,6 +294,47 @@ def test_scored_map_needs_a_majority_of_shadowed_sand_but_drive_map_ignores_it(l
     assert (scored[0] == 255) == (seen and not scored_nav)
 
 
+def _floor_ring(neighbours_on_floor):
+    """Cell (100, 100) with a little sand among its votes, and that many of its 8 neighbours light floor."""
+    mem = P.PerceptionMemory()
+    mem.nav_votes[100, 100], mem.obs_votes[100, 100] = 2.0, 18.0  # light share 0.1: not floor by itself
+    ring = [(99, 99), (99, 100), (99, 101), (100, 101), (101, 101), (101, 100), (101, 99), (100, 99)]
+    for y, x in ring[:neighbours_on_floor]:
+        mem.nav_votes[y, x] = 20.0
+    return mem
+
+
+@pytest.mark.parametrize("neighbours", [P.FILL_MIN_NEIGHBOURS - 1, P.FILL_MIN_NEIGHBOURS, 8])
+def test_scored_map_fills_a_notch_that_floor_surrounds_on_most_sides(neighbours):
+    mem = _floor_ring(neighbours)
+    filled = neighbours >= P.FILL_MIN_NEIGHBOURS
+    scored = P.render_worldmap(mem)[100, 100]
+    assert (scored[2] == 255) == filled and (scored[0] == 255) == (not filled)
+    assert P.render_worldmap(mem, drive=True)[100, 100, 2] == 0  # never driven on by the fill
+    mem.nav_votes[100, 100] = 0.0  # no sand at all among the votes: a dark rock in the floor stays obstacle
+    assert P.render_worldmap(mem)[100, 100, 2] == 0
+    mem.nav_votes[100, 100], mem.obs_votes[100, 100] = 0.0, 2.0  # too few votes to be seen: never filled
+    assert P.render_worldmap(mem)[100, 100].tolist() == [0, 0, 0]
+
+
+def test_windowed_map_updates_match_a_full_rebuild():
+    rng = np.random.default_rng(5)
+    mem = P.PerceptionMemory()
+    mem.nav_votes[:] = rng.uniform(0, 10, mem.nav_votes.shape) * (rng.random(mem.nav_votes.shape) < 0.6)
+    mem.obs_votes[:] = rng.uniform(0, 10, mem.obs_votes.shape)
+    mem.shade_votes[:] = mem.obs_votes * rng.random(mem.obs_votes.shape) * 0.5
+    out = P.render_worldmap(mem)
+    for _ in range(300):
+        y0, x0 = rng.integers(0, P.WORLD_SIZE - 1, 2)
+        y1, x1 = min(y0 + rng.integers(1, 6), P.WORLD_SIZE), min(x0 + rng.integers(1, 6), P.WORLD_SIZE)
+        mem.nav_votes[y0:y1, x0:x1] += rng.uniform(0, 8, (y1 - y0, x1 - x0)).astype(np.float32)
+        mem.obs_votes[y0:y1, x0:x1] += rng.uniform(0, 8, (y1 - y0, x1 - x0)).astype(np.float32)
+        P.render_worldmap(mem, out, (y0, y1, x0, x1))
+    full = P.render_worldmap(mem)
+    assert np.array_equal(out[:, :, [0, 2]], full[:, :, [0, 2]])
+    assert (full[:, :, 2] > 0).mean() > 0.2  # the test map has floor to fill around
+
+
 def test_closest_look_map_records_how_near_the_camera_saw_each_cell():
     r = _rover(_synthetic(sand_from_row=84), pos=(100.0, 100.0), yaw=0.0)
     P.perception_step(r)
