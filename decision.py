@@ -827,11 +827,8 @@ def _plan_search(rover, nav, s):
 
 
 def _peek_goal(rover, nav, s, free, dist):
-    """Best shadowed pocket to look into (see explore.peek_targets) on perception's scored map, or None."""
-    scored = getattr(rover, "worldmap", None)
-    if not isinstance(scored, np.ndarray) or scored.shape != (grid.GRID_SIZE, grid.GRID_SIZE, 3):
-        return None
-    shadow_floor = (scored[:, :, 2] > 0) & ~free
+    """Best shadowed pocket to look into (see explore.peek_targets) on perception's pocket floor, or None."""
+    shadow_floor = perception.pocket_floor(rover) & ~free
     looked = perception.looked_at_within(rover, explore.PEEK_RANGE_M)
     targets = explore.peek_targets(free, shadow_floor, looked, nav.search_done, dist)
     current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "peek" else None

@@ -52,6 +52,7 @@ CAMERA_HEIGHT_M = CAMERA_MOUNT_UP_M + ROOT_HEIGHT_M  # camera above a flat floor
 NAV_RGB_MIN = (161, 161, 161)  # light floor sand: every channel above 160
 # sand in a cast shadow: darker than NAV_RGB_MIN but still sand-coloured (grey-beige) and smooth
 SHADE_SAND_MIN_R = 110  # red at least this (sand light enough to map keeps R >= ~110 in a 0.6 shadow; shadowed walls are darker), 0..255
+POCKET_SAND_MIN_R = 130  # shadowed sand at least this red also counts for the sample search's pocket peeks (darker sand is mapped, not peeked into), 0..255
 SHADE_SAND_MIN_G_PER_R = 0.90  # green / red at least this (slope feet and rock faces are redder)
 SHADE_SAND_MIN_B_PER_R = 0.83  # blue / red at least this (gold samples and brown rock have little blue)
 SHADE_SAND_MAX_SD = 10.0  # red standard deviation in the window at most this (rough rock is textured), 0..255
@@ -314,7 +315,7 @@ def _build_tables():
     _LEVEL_H = ground_homography(0.0, 0.0)
 
 
-_LABEL_UNKNOWN, _LABEL_OBSTACLE, _LABEL_NAV, _LABEL_SHADE = 0, 1, 2, 3
+_LABEL_UNKNOWN, _LABEL_OBSTACLE, _LABEL_NAV, _LABEL_SHADE, _LABEL_DIM_SHADE = 0, 1, 2, 3, 4
 _build_tables()
 
 
@@ -343,18 +344,22 @@ class PerceptionMemory:
         come from level frames (TILT_GATE_DEG) and ground within MAP_RANGE_M.
     rock_clusters: list of [sum_w*x, sum_w*y, sum_w, hits] per remembered sample rock.
     frames_seen, frames_mapped: counters (mapped = passed the tilt gate).
-    shade_votes: float32 (200, 200); the part of obs_votes that was sand in shadow.  The
-        scored ``rover.worldmap`` counts it as navigable, the drive map as obstacle.
+    shade_votes: float32 (200, 200); the part of obs_votes that was sand in shadow at least
+        POCKET_SAND_MIN_R red.  The scored ``rover.worldmap`` counts it as navigable, the
+        drive map as obstacle; :func:`pocket_floor` counts it too.
+    dim_shade_votes: float32 (200, 200); the part of obs_votes that was darker sand in shadow
+        (SHADE_SAND_MIN_R up to POCKET_SAND_MIN_R): navigable on the scored map only.
     look_range: float32 (200, 200); the closest range (m) from which the camera has seen
         each cell (inf: never within LOOK_RANGE_MAX_M).  Small samples only show from close
         by, so the sample search reads it through :func:`looked_at_within`.
     last_grid: uint8 top-down label grid of the last frame (0 unknown, 1 obstacle, 2 navigable,
-        3 sand in shadow),
+        3 sand in shadow, 4 darker sand in shadow),
         rows = forward distance (row i at (i + 0.5) * GRID_RES_M), cols = lateral (left at high j).
     """
     nav_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     obs_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     shade_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
+    dim_shade_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     look_range: np.ndarray = field(default_factory=lambda: np.full((WORLD_SIZE, WORLD_SIZE), np.inf, np.float32))
     rock_clusters: List[list] = field(default_factory=list)
     frames_seen: int = 0
@@ -407,6 +412,16 @@ def drive_map(rover) -> np.ndarray:
     return getattr(rover, "worldmap", None)
 
 
+def pocket_floor(rover) -> np.ndarray:
+    """bool (200, 200) [y, x]: floor the sample search may peek into for hidden samples.
+
+    The scored map without its darker shadowed sand and without the notch fill: the
+    peeks were tuned on this stricter floor, and every extra pocket costs a detour
+    (procedural:2 ran out of time at 5 of 6 samples when the peeks read the scored map).
+    """
+    return _majority_navigable(get_memory(rover), 0, WORLD_SIZE, 0, WORLD_SIZE, dim_shade=False)[1]
+
+
 def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, window=None,
                     drive=False) -> np.ndarray:
     """Rebuild the displayed worldmap from the votes (R obstacle, G rock, B navigable).
@@ -440,14 +455,20 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
     return out
 
 
-def _majority_navigable(mem: PerceptionMemory, y0, y1, x0, x1, drive=False):
-    """(seen, navigable) bool arrays for the window by the vote-share rules alone."""
+def _majority_navigable(mem: PerceptionMemory, y0, y1, x0, x1, drive=False, dim_shade=True):
+    """(seen, navigable) bool arrays for the window by the vote-share rules alone.
+
+    ``drive`` ignores shadowed sand; ``dim_shade=False`` ignores only its darker part.
+    """
     nav = mem.nav_votes[y0:y1, x0:x1]
     total = nav + mem.obs_votes[y0:y1, x0:x1]
     seen = total >= MIN_CELL_VOTES
     is_nav = seen & (nav > NAV_MAJORITY * total)
     if not drive:
-        is_nav |= seen & (nav + mem.shade_votes[y0:y1, x0:x1] > SHADE_MAJORITY * total)
+        sand = nav + mem.shade_votes[y0:y1, x0:x1]
+        if dim_shade:
+            sand = sand + mem.dim_shade_votes[y0:y1, x0:x1]
+        is_nav |= seen & (sand > SHADE_MAJORITY * total)
     return seen, is_nav
 
 
@@ -461,7 +482,8 @@ def _filled_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
     seen, is_nav = _majority_navigable(mem, py0, py1, px0, px1)
     neighbours = cv2.filter2D(is_nav.view(np.uint8), cv2.CV_16S, _EIGHT_NEIGHBOURS, borderType=cv2.BORDER_CONSTANT)
     total = mem.nav_votes[py0:py1, px0:px1] + mem.obs_votes[py0:py1, px0:px1]
-    sand = mem.nav_votes[py0:py1, px0:px1] + mem.shade_votes[py0:py1, px0:px1]
+    sand = (mem.nav_votes[py0:py1, px0:px1] + mem.shade_votes[py0:py1, px0:px1]
+            + mem.dim_shade_votes[py0:py1, px0:px1])
     is_nav = is_nav | (seen & (neighbours >= FILL_MIN_NEIGHBOURS) & (sand >= FILL_MIN_SAND_SHARE * total))
     inner = (slice(y0 - py0, y0 - py0 + (y1 - y0)), slice(x0 - px0, x0 - px0 + (x1 - x0)))
     return seen[inner], is_nav[inner]
@@ -509,6 +531,8 @@ _GRID_LUT = np.zeros(256, np.uint8)  # warped nav8 value -> label
 _GRID_LUT[0], _GRID_LUT[255], _GRID_LUT[128] = 1, 2, 0  # obstacle, navigable, outside the image
 _SHADE_VALUE = 192  # camera-mask value of sand in shadow (neither 0, 255 nor the border)
 _GRID_LUT[_SHADE_VALUE] = _LABEL_SHADE
+_DIM_SHADE_VALUE = _SHADE_VALUE - 128  # camera-mask value of shadowed sand darker than POCKET_SAND_MIN_R
+_GRID_LUT[_DIM_SHADE_VALUE] = _LABEL_DIM_SHADE
 _WARP_BORDER = 128  # value the warp gives grid cells outside the camera image
 
 
@@ -635,11 +659,12 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
     w = _MAP_WEIGHT[known_idx]
     kind = labels[known_idx]
     is_nav = kind == _LABEL_NAV
-    is_shade = kind == _LABEL_SHADE
     size = (y1 - y0) * w_cols
-    if is_shade.any():
-        mem.shade_votes[y0:y1, x0:x1] += np.bincount(
-            local[is_shade], w[is_shade] * OBS_VOTE_WEIGHT, size).reshape(y1 - y0, w_cols)
+    for label, votes in ((_LABEL_SHADE, mem.shade_votes), (_LABEL_DIM_SHADE, mem.dim_shade_votes)):
+        is_shade = kind == label
+        if is_shade.any():
+            votes[y0:y1, x0:x1] += np.bincount(
+                local[is_shade], w[is_shade] * OBS_VOTE_WEIGHT, size).reshape(y1 - y0, w_cols)
     mem.nav_votes[y0:y1, x0:x1] += np.bincount(local[is_nav], w[is_nav] * NAV_VOTE_WEIGHT, size).reshape(
         y1 - y0, w_cols)
     mem.obs_votes[y0:y1, x0:x1] += np.bincount(local[~is_nav], w[~is_nav] * OBS_VOTE_WEIGHT, size).reshape(
@@ -665,14 +690,16 @@ def perception_step(rover):
     nav8 = cv2.inRange(img, NAV_RGB_MIN, (255, 255, 255))
     rock8 = cv2.inRange(img, ROCK_RGB_MIN, ROCK_RGB_MAX)
     shade8 = cv2.bitwise_and(shadowed_sand_u8(img), cv2.bitwise_not(nav8))
+    dim8 = cv2.bitwise_and(shade8, cv2.inRange(img, (0, 0, 0), (POCKET_SAND_MIN_R - 1, 255, 255)))
     labels8 = cv2.bitwise_or(nav8, np.bitwise_and(shade8, np.uint8(_SHADE_VALUE)))
+    labels8 = cv2.subtract(labels8, np.bitwise_and(dim8, np.uint8(_SHADE_VALUE - _DIM_SHADE_VALUE)))
     grid = _warp_labels(labels8, pitch, roll)
     mem.last_grid = grid
 
     # decision outputs (always, even when tilted: the warp already accounts for tilt);
     # the rover drives on bright sand only, so shadowed sand is an obstacle here
     nav_cells = grid == _LABEL_NAV
-    obs_cells = (grid == _LABEL_OBSTACLE) | (grid == _LABEL_SHADE)
+    obs_cells = (grid != _LABEL_UNKNOWN) & (grid != _LABEL_NAV)
     rover.nav_angles = _GRID_ANGLE[nav_cells]
     rover.nav_dists = _GRID_DIST[nav_cells]
     rover.obs_angles = _GRID_ANGLE[obs_cells]

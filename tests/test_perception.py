@@ -257,6 +257,23 @@ def test_sand_in_shadow_is_mapped_but_not_driven_on():
     assert left[0] < plain[0] and left[2] > plain[2]  # drawn half blue, not obstacle red
 
 
+def test_darker_shadowed_sand_is_scored_but_not_a_pocket_to_peek_into():
+    img = _synthetic(sand_from_row=85)
+    img[85:, 0:100] = _noisy((121, 110, 102), 1.5, shape=(75, 100))  # far left: sand in deep shadow
+    img[85:, 100:200] = _noisy((150, 140, 128), 1.5, shape=(75, 100))  # nearer left: lighter shadow
+    r = _rover(img, pos=(100.0, 100.0), yaw=0.0)
+    for _ in range(4):
+        P.perception_step(r)
+    scored = r.worldmap[:, :, 2] > 0
+    pocket = P.pocket_floor(r)
+    driven = P.drive_map(r)[:, :, 2] > 0
+    assert not (pocket & ~scored).any() and not (driven & ~pocket).any()  # each map is stricter than the last
+    deep, light = scored & ~pocket, pocket & ~driven
+    assert deep.sum() >= 5 and light.sum() >= 5
+    assert np.nonzero(deep)[0].mean() > np.nonzero(light)[0].mean()  # the deep shade is the one farther left
+    assert r.nav_angles.size > 0 and (r.nav_angles < 0).all()  # decision drives on neither shade, only the sunlit right
+
+
 def test_sand_in_shadow_right_under_a_wall_is_found():
     # the shadowed floor meets a dark wall along an image row (as it does at every canyon edge);
     # the texture test must not count the wall above as roughness of the sand below it
@@ -323,6 +340,7 @@ def test_windowed_map_updates_match_a_full_rebuild():
     mem.nav_votes[:] = rng.uniform(0, 10, mem.nav_votes.shape) * (rng.random(mem.nav_votes.shape) < 0.6)
     mem.obs_votes[:] = rng.uniform(0, 10, mem.obs_votes.shape)
     mem.shade_votes[:] = mem.obs_votes * rng.random(mem.obs_votes.shape) * 0.5
+    mem.dim_shade_votes[:] = mem.obs_votes * rng.random(mem.obs_votes.shape) * 0.3
     out = P.render_worldmap(mem)
     for _ in range(300):
         y0, x0 = rng.integers(0, P.WORLD_SIZE - 1, 2)
