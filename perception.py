@@ -12,7 +12,8 @@ Why it is built this way:
 - Sand in a cast shadow is too dark for the classic threshold; a colour-and-texture
   rule finds it.  It is mapped as floor (the map is scored against the canyon's
   floor), but the planner drives on the bright-sand map only (:func:`drive_map`):
-  a shadowed pocket is often a wall foot where the rover wedges.
+  a shadowed pocket is often a wall foot where the rover wedges.  The sample search's
+  peeks into pockets read :func:`pocket_floor`, which keeps a stricter red floor.
 - Speed: everything per frame is a few OpenCV calls on a fixed-size top-down grid
   plus ``np.bincount`` on precomputed cell indices (well under 1 ms).
 
@@ -465,11 +466,14 @@ def _majority_navigable(mem: PerceptionMemory, y0, y1, x0, x1, drive=False, dim_
     seen = total >= MIN_CELL_VOTES
     is_nav = seen & (nav > NAV_MAJORITY * total)
     if not drive:
-        sand = nav + mem.shade_votes[y0:y1, x0:x1]
-        if dim_shade:
-            sand = sand + mem.dim_shade_votes[y0:y1, x0:x1]
-        is_nav |= seen & (sand > SHADE_MAJORITY * total)
+        is_nav |= seen & (_sand_votes(mem, y0, y1, x0, x1, dim_shade) > SHADE_MAJORITY * total)
     return seen, is_nav
+
+
+def _sand_votes(mem: PerceptionMemory, y0, y1, x0, x1, dim_shade=True) -> np.ndarray:
+    """Light plus shadowed sand votes in the window (``dim_shade=False``: without the darker part)."""
+    sand = mem.nav_votes[y0:y1, x0:x1] + mem.shade_votes[y0:y1, x0:x1]
+    return sand + mem.dim_shade_votes[y0:y1, x0:x1] if dim_shade else sand
 
 
 def _filled_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
@@ -482,8 +486,7 @@ def _filled_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
     seen, is_nav = _majority_navigable(mem, py0, py1, px0, px1)
     neighbours = cv2.filter2D(is_nav.view(np.uint8), cv2.CV_16S, _EIGHT_NEIGHBOURS, borderType=cv2.BORDER_CONSTANT)
     total = mem.nav_votes[py0:py1, px0:px1] + mem.obs_votes[py0:py1, px0:px1]
-    sand = (mem.nav_votes[py0:py1, px0:px1] + mem.shade_votes[py0:py1, px0:px1]
-            + mem.dim_shade_votes[py0:py1, px0:px1])
+    sand = _sand_votes(mem, py0, py1, px0, px1)
     is_nav = is_nav | (seen & (neighbours >= FILL_MIN_NEIGHBOURS) & (sand >= FILL_MIN_SAND_SHARE * total))
     inner = (slice(y0 - py0, y0 - py0 + (y1 - y0)), slice(x0 - px0, x0 - px0 + (x1 - x0)))
     return seen[inner], is_nav[inner]
