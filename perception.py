@@ -437,7 +437,7 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
     if drive:
         seen, is_nav = _majority_navigable(mem, y0, y1, x0, x1, drive=True)
     elif y1 > y0 and x1 > x0:
-        y0, y1, x0, x1 = max(y0 - 1, 0), min(y1 + 1, WORLD_SIZE), max(x0 - 1, 0), min(x1 + 1, WORLD_SIZE)
+        y0, y1, x0, x1 = _grown(y0, y1, x0, x1)
         seen, is_nav = _filled_navigable(mem, y0, y1, x0, x1)
     else:
         seen = is_nav = np.zeros((0, 0), bool)
@@ -482,7 +482,7 @@ def _filled_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
     map_bw's floor edges are smooth; a seen cell that some sand votes for and that floor
     surrounds on most sides is a notch the votes left, not a wall.
     """
-    py0, py1, px0, px1 = max(y0 - 1, 0), min(y1 + 1, WORLD_SIZE), max(x0 - 1, 0), min(x1 + 1, WORLD_SIZE)
+    py0, py1, px0, px1 = _grown(y0, y1, x0, x1)
     seen, is_nav = _majority_navigable(mem, py0, py1, px0, px1)
     neighbours = cv2.filter2D(is_nav.view(np.uint8), cv2.CV_16S, _EIGHT_NEIGHBOURS, borderType=cv2.BORDER_CONSTANT)
     total = mem.nav_votes[py0:py1, px0:px1] + mem.obs_votes[py0:py1, px0:px1]
@@ -490,6 +490,11 @@ def _filled_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
     is_nav = is_nav | (seen & (neighbours >= FILL_MIN_NEIGHBOURS) & (sand >= FILL_MIN_SAND_SHARE * total))
     inner = (slice(y0 - py0, y0 - py0 + (y1 - y0)), slice(x0 - px0, x0 - px0 + (x1 - x0)))
     return seen[inner], is_nav[inner]
+
+
+def _grown(y0, y1, x0, x1):
+    """The window (y0, y1, x0, x1) one cell larger on every side, within the map."""
+    return max(y0 - 1, 0), min(y1 + 1, WORLD_SIZE), max(x0 - 1, 0), min(x1 + 1, WORLD_SIZE)
 
 
 _EIGHT_NEIGHBOURS = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], np.float32)  # kernel counting a cell's neighbours
