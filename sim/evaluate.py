@@ -58,7 +58,7 @@ def parse_seeds(text: str) -> list:
     return sorted(seeds)
 
 
-def _init_worker(world_spec, quiet=True, shadows=True):
+def _init_worker(world_spec, quiet=True, shadows=False):
     global _WORLD
     if quiet:  # worker processes: only warnings, the parent shows progress
         logging.basicConfig(level=logging.WARNING)
@@ -149,7 +149,7 @@ def write_outputs(out: Path, results, summary, meta):
 
 
 def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIMIT_S, out=DEFAULT_OUT,
-             progress=True, shadows=True, home_by=None) -> dict:
+             progress=True, shadows=False, home_by=None) -> dict:
     from tqdm import tqdm
 
     out = Path(out)

@@ -156,7 +156,7 @@ class MissionResult:
     rejected_commands: int
     stuck_stretches: list = field(default_factory=list)  # [t, x, y, duration_s] >= STUCK_REPORT_MIN_S
     files: dict = field(default_factory=dict)
-    shadows: bool = True  # the twin rendered terrain cast shadows (--shadows on)
+    shadows: bool = False  # the twin rendered terrain cast shadows (--shadows on)
     home_by_s: float | None = None  # the client's return deadline when set (--home-by), s
 
     def as_dict(self):
@@ -366,7 +366,7 @@ def format_result(r: dict) -> str:
     def f(v, fmt="{:.1f}%"):
         return "n/a" if v is None else fmt.format(v)
 
-    shadows = "" if r.get("shadows", True) else ", no shadows"
+    shadows = ", shadows on" if r.get("shadows", False) else ""
     return (f"seed {r['seed']} [{r['world']}, {r['mode']}{shadows}]: mapped {f(r['mapped_pct'])}, "
             f"fidelity {f(r['fidelity_pct'])}, located {f(r['located'], '{}')}/{r['samples']}, "
             f"collected {r['collected']}/{r['samples']}, home {'yes' if r['returned_home'] else 'no'}, "

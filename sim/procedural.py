@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.world import (FLOOR_TOLERANCE_M, MAP_CELLS, ROCK_CELL_M, ROCK_SAMPLES, SAND_CELL_M,
+from sim.scene import (FLOOR_TOLERANCE_M, MAP_CELLS, ROCK_CELL_M, ROCK_SAMPLES, SAND_CELL_M,
                        SAND_TEXELS, TERRAIN_CELL_M, TERRAIN_SAMPLES, WORLD_SIZE_M, World,
                        nav_truth_from_geometry)
 

@@ -42,7 +42,9 @@ def test_twin_without_shadows_maps_like_the_real_frames(megalphian, real_world):
 
 
 def test_shadowed_sand_rule_maps_the_shadowed_twin_like_the_real_frames(megalphian, real_world):
-    on, _, _ = map_realism.compare(megalphian, real_world, STRIDE)
+    from sim.world import with_shadows
+
+    on, _, _ = map_realism.compare(megalphian, with_shadows(real_world, True), STRIDE)
     assert on.shadows == "on"
     # before the one-row texture window and the shadowed-sand majority this gap was -5.5 points
     assert on.mapped_gap >= -MAX_GAP_SHADOWS_OFF, on

@@ -14,10 +14,11 @@ FRAME_STRIDE = 2  # every 2nd of the 283 frames keeps the test quick
 @pytest.fixture(scope="module")
 def figures(test_dataset_dir, world_dir):
     from sim.render import Renderer
-    from sim.world import load_world
+    from sim.world import load_world, with_shadows
 
     frames = realism.read_test_dataset(test_dataset_dir)[::FRAME_STRIDE]
-    near, whole, _ = realism.evaluate(Renderer(load_world("real")), frames)
+    # test_dataset was recorded with terrain shadows (the fitted-on drive), so the twin casts them here
+    near, whole, _ = realism.evaluate(Renderer(with_shadows(load_world("real"), True)), frames)
     return realism.summarise(near, whole)
 
 

@@ -194,10 +194,11 @@ def test_shadows_off_lights_the_shadowed_floor():
     from sim.render import SHADOW_FACTOR, _baked_for
     from sim.world import with_shadows
 
-    on = load_world("procedural:0")
+    on = with_shadows(load_world("procedural:0"), True)
     off = with_shadows(on, False)
     assert off is not on and not off.cast_shadows and on.cast_shadows
     assert with_shadows(on, True) is on  # no copy when nothing changes
+    assert not load_world("procedural:0").cast_shadows  # off unless asked for
     lit_on, lit_off = _baked_for(on)["light"], _baked_for(off)["light"]
     shadow_on = _baked_for(on)["shadow"]
     shadowed = shadow_on > 0.9
