@@ -1,6 +1,6 @@
 """Run the baseline policy (our AutonomyClient) in `RoverTwin-v0` and save what it saw.
 
-    python -m rover_gym.demo [--steps 1500] [--world default] [--seed 0] [--shadows on|off]
+    python -m rover_gym.demo [--steps 1500] [--world default] [--seed 0] [--shadows off|on]
                              [--out out/gym-demo.png]
 
 Prints the episode's reward split (mapping, samples, home) and writes the env's
@@ -19,7 +19,7 @@ DEFAULT_STEPS = 1500  # env steps (0.04 s each in lockstep timing: 60 s of simul
 DEFAULT_OUT = "out/gym-demo.png"  # where the final render() image goes
 
 
-def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=True, timing="lockstep", progress=True):
+def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=False, timing="lockstep", progress=True):
     """Run the baseline for up to `steps` steps; returns (summary dict, final render image)."""
     import gymnasium
     from tqdm import tqdm
@@ -52,7 +52,9 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=DEFAULT_STEPS, help="env steps (0.04 s each)")
     p.add_argument("--world", default="default", help="real | procedural:K | PATH.png")
     p.add_argument("--seed", type=int, default=0, help="scene seed")
-    p.add_argument("--shadows", choices=("on", "off"), default="on")
+    from sim.cli import add_shadows_option
+
+    add_shadows_option(p)
     p.add_argument("--timing", choices=("lockstep", "unity"), default="lockstep")
     p.add_argument("--out", default=DEFAULT_OUT, help="PNG of the final render()")
     p.add_argument("--no-progress", action="store_true")
