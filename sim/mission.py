@@ -339,6 +339,16 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
         summary = run_inprocess(world_obj, seed, time_limit=time_limit, video=video, record=record,
                                 progress=progress, render=render, home_by=home_by)
         mode = "inprocess"
+    return finish_mission(world_obj, seed, mode, summary, time_limit, out=out, write_files=write_files,
+                          home_by=home_by, video=video, record=record)
+
+
+def finish_mission(world_obj, seed, mode, summary, time_limit, out=None, write_files=True, home_by=None,
+                   video=None, record=None) -> dict:
+    """Score a finished run's summary and (optionally) write mission.json/.png and worldmap.npy.
+
+    Shared by every way of running a mission (in-process, wire, a third-party client).
+    """
     summary["stuck"].close_run()
     result = score(world_obj, seed, mode, summary, time_limit)
     result.home_by_s = home_by
