@@ -174,8 +174,10 @@ class MapSaver:
 
 
 # --------------------------------------------------------------------------- server
-def build_server(client, recorder: Optional[Recorder] = None, map_saver: Optional[MapSaver] = None):
-    """The Socket.IO server and WSGI app around ``client`` (an AutonomyClient)."""
+def build_server(client, recorder: Optional[Recorder] = None, map_saver: Optional[MapSaver] = None,
+                 dashboard=None):
+    """The Socket.IO server and WSGI app around ``client`` (an AutonomyClient);
+    ``dashboard`` (optional) gets ``observe(client, event)`` after every reply."""
     import flask
     import socketio
 
@@ -228,6 +230,8 @@ def build_server(client, recorder: Optional[Recorder] = None, map_saver: Optiona
         if map_saver is not None and event != "manual":
             map_saver.maybe_save(client.rover)
         sio.emit(event, payload, room=sid)
+        if dashboard is not None:
+            dashboard.observe(client, event)
 
     app = flask.Flask(__name__)
 
@@ -275,6 +279,9 @@ def parse_args(argv=None):
                    help="write the worldmap (200x200x3 uint8, [y, x]) here every "
                         f"{SAVE_MAP_EVERY_FRAMES} frames and at exit")
     add_home_by_option(p)
+    from dashboard import add_dashboard_options
+
+    add_dashboard_options(p)
     p.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ... (default %(default)s)")
     return p.parse_args(argv)
 
@@ -321,7 +328,15 @@ def main(argv=None) -> int:
     if recorder is not None:
         log.info("recording into %s", recorder.folder)
     map_saver = MapSaver(args.save_map) if args.save_map else None
-    _, wsgi_app = build_server(client, recorder, map_saver)
+    dashboard = None
+    if args.dashboard:
+        from dashboard import LiveDashboard
+
+        try:
+            dashboard = LiveDashboard(args.dashboard_port, title="drive_rover").start()
+        except OSError as exc:
+            sys.exit(f"--dashboard-port: {exc}")
+    _, wsgi_app = build_server(client, recorder, map_saver, dashboard)
     host, port = listener.getsockname()[:2]
     log.info("listening on %s:%d; now start the simulator and choose Autonomous mode", host, port)
 

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dashboard import add_dashboard_options
 from drive_rover import add_home_by_option
 from sim.cli import add_shadows_option, parse_with_logging
 
@@ -228,8 +229,11 @@ def _video_frame(rgb, worldmap):
 
 
 def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None, progress=True,
-                  render=True, client_factory=None, home_by=None):
-    """Drive `AutonomyClient` against `RoverTwin` in this process; returns (result dict, worldmap, traj)."""
+                  render=True, client_factory=None, home_by=None, watchers=()):
+    """Drive `AutonomyClient` against `RoverTwin` in this process; returns (result dict, worldmap, traj).
+
+    watchers: objects with ``observe(client, event, force=False)`` called after every reply
+    (the dashboard and the viewer's timeline), and once more with force=True at the end."""
     from sim.twin import CommandError, RoverTwin
 
     if client_factory is None:
@@ -252,6 +256,8 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
             if recorder is not None:
                 recorder.write_twin(twin)
             event, payload = client.handle_telemetry(tel)
+            for watcher in watchers:
+                watcher.observe(client, event)
             try:
                 tel = twin.step(event, payload)
             except CommandError as exc:  # the real simulator would stall here
@@ -270,6 +276,8 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
                 end_reason, completed = "mission complete", True
                 break
     finally:
+        for watcher in watchers:
+            watcher.observe(client, None, force=True)
         bar.close()
         if writer is not None:
             writer.release()
@@ -321,10 +329,13 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
 
 
 def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,
-                wire=False, progress=True, render=True, write_files=True, home_by=None) -> dict:
+                wire=False, progress=True, render=True, write_files=True, home_by=None, dashboard=None,
+                dashboard_port=None) -> dict:
     """Run, score and (optionally) write mission.json + mission.png; returns the result dict.
 
     home_by: the client's return deadline, s (None: its default, decision.HOME_BY_S).
+    dashboard: a live dashboard (in-process missions) fed every frame; dashboard_port: with
+    ``wire``, drive_rover.py serves the dashboard itself on this port.
     """
     from sim.world import World, load_world
 
@@ -332,12 +343,18 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
     if wire:
         from sim.wire import run_wire_mission
 
+        client_args = ["--dashboard", "--dashboard-port", str(dashboard_port)] if dashboard_port else []
         summary = run_wire_mission(world_obj, seed, time_limit=time_limit, record=record,
-                                   progress=progress, render=render, home_by=home_by)
+                                   progress=progress, render=render, home_by=home_by, client_args=client_args)
         mode = "wire"
+        timeline = None
     else:
+        from dashboard.timeline import Timeline
+
+        timeline = Timeline() if write_files else None
+        watchers = [w for w in (timeline, dashboard) if w is not None]
         summary = run_inprocess(world_obj, seed, time_limit=time_limit, video=video, record=record,
-                                progress=progress, render=render, home_by=home_by)
+                                progress=progress, render=render, home_by=home_by, watchers=watchers)
         mode = "inprocess"
     return finish_mission(world_obj, seed, mode, summary, time_limit, out=out, write_files=write_files,
                           home_by=home_by, video=video, record=record)
@@ -364,6 +381,8 @@ def finish_mission(world_obj, seed, mode, summary, time_limit, out=None, write_f
         if summary.get("worldmap") is not None:
             write_npy_atomic(out / "worldmap.npy", summary["worldmap"])
             result.files["worldmap"] = str(out / "worldmap.npy")
+        if timeline is not None:
+            result.files["timeline"] = str(timeline.save(out / "timeline.npz"))
         if video:
             result.files["video"] = str(video)
         if record:
@@ -395,22 +414,59 @@ def main(argv=None) -> int:
     p.add_argument("--wire", action="store_true", help="run drive_rover.py and talk the real wire protocol")
     add_home_by_option(p)
     add_shadows_option(p)
+    add_dashboard_options(p)
     p.add_argument("--no-progress", action="store_true")
     a = parse_with_logging(p, argv)
     if a.time_limit <= 0 or not math.isfinite(a.time_limit):
         p.error("--time-limit must be a positive number of seconds")
+    dash = None
+    if a.dashboard and not a.wire:
+        from dashboard import LiveDashboard
+
+        try:
+            dash = LiveDashboard(a.dashboard_port, title=f"seed {a.seed} on the twin").start()
+        except OSError as exc:
+            p.error(f"--dashboard-port: {exc}")
+    elif a.dashboard:  # drive_rover.py serves it; check the port here so the error comes first
+        from dashboard.server import port_problem
+        from sim.wire import free_port
+
+        a.dashboard_port = a.dashboard_port or free_port()
+        problem = port_problem("127.0.0.1", a.dashboard_port)
+        if problem:
+            p.error(f"--dashboard-port: {problem}")
+        log.info("dashboard (served by drive_rover.py): open http://127.0.0.1:%d/ in a browser", a.dashboard_port)
     try:
         from sim.world import load_world, with_shadows
 
         world = with_shadows(load_world(a.world), a.shadows == "on")
         r = run_mission(a.seed, world, a.time_limit, a.out, a.video, a.record, a.wire,
-                        progress=not a.no_progress, home_by=a.home_by)
+                        progress=not a.no_progress, home_by=a.home_by, dashboard=dash,
+                        dashboard_port=a.dashboard_port if a.dashboard and a.wire else None)
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
     log.info("%s", format_result(r))
     log.info("wrote %s", ", ".join(r["files"].values()))
+    if dash is not None:
+        _keep_showing(dash, r)
     return 0
+
+
+def _keep_showing(dash, result):
+    """After a --dashboard mission the page turns into the finished-mission viewer until Ctrl-C."""
+    from dashboard.viewer import MissionSource
+
+    folder = Path(result["files"]["json"]).parent
+    try:
+        dash.server.show(MissionSource(folder, result["files"].get("record")))
+        log.info("mission over: %s now scrubs through it; Ctrl-C to quit", dash.url)
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        dash.close()
 
 
 if __name__ == "__main__":

@@ -286,7 +286,7 @@ def _load_client_map(path):
 
 
 def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, render=True,
-                     server_log=None, home_by=None):
+                     server_log=None, home_by=None, client_args=()):
     """Twin over the real protocol against drive_rover.py in a subprocess (lockstep).
 
     The client's worldmap lives in the other process: it is scored only when
@@ -304,6 +304,7 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
     extra = [CLIENT_MAP_OPTION, map_path] if client_supports_map_dump() else []
     if home_by is not None:
         extra += ["--home-by", repr(float(home_by))]
+    extra += list(client_args)  # e.g. --dashboard
     proc = start_client_server(port, server_log, extra)
     state = {"end": "time limit", "completed": False, "still_home_s": 0.0, "distance": 0.0}
     stuck = StuckMeter()
@@ -349,11 +350,11 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
         stop_process(proc)
         if recorder is not None:
             recorder.close()
-    worldmap = _load_client_map(map_path) if extra else None
+    worldmap = _load_client_map(map_path) if CLIENT_MAP_OPTION in extra else None
     import shutil
 
     shutil.rmtree(map_dir, ignore_errors=True)  # our own temp folder
-    if extra and worldmap is None:
+    if CLIENT_MAP_OPTION in extra and worldmap is None:
         log.warning("drive_rover.py did not leave a readable worldmap at %s", map_path)
     return dict(twin=twin, stuck=stuck, traj=traj, distance=state["distance"],
                 wall=time.perf_counter() - t0, end_reason=state["end"], completed=state["completed"],
