@@ -347,7 +347,6 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
         summary = run_wire_mission(world_obj, seed, time_limit=time_limit, record=record,
                                    progress=progress, render=render, home_by=home_by, client_args=client_args)
         mode = "wire"
-        timeline = None
     else:
         from dashboard.timeline import Timeline
 
@@ -355,6 +354,7 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
         watchers = [w for w in (timeline, dashboard) if w is not None]
         summary = run_inprocess(world_obj, seed, time_limit=time_limit, video=video, record=record,
                                 progress=progress, render=render, home_by=home_by, watchers=watchers)
+        summary["timeline"] = timeline
         mode = "inprocess"
     return finish_mission(world_obj, seed, mode, summary, time_limit, out=out, write_files=write_files,
                           home_by=home_by, video=video, record=record)
@@ -381,8 +381,8 @@ def finish_mission(world_obj, seed, mode, summary, time_limit, out=None, write_f
         if summary.get("worldmap") is not None:
             write_npy_atomic(out / "worldmap.npy", summary["worldmap"])
             result.files["worldmap"] = str(out / "worldmap.npy")
-        if timeline is not None:
-            result.files["timeline"] = str(timeline.save(out / "timeline.npz"))
+        if summary.get("timeline") is not None:  # the finished-mission viewer's story (python -m dashboard)
+            result.files["timeline"] = str(summary["timeline"].save(out / "timeline.npz"))
         if video:
             result.files["video"] = str(video)
         if record:
