@@ -2,11 +2,13 @@
 
     python -m sim.evaluate --seeds 0-19 [--world real|procedural:K|PNG] [--jobs 2]
                            [--time-limit S] [--out DIR]
+                           [--client PATH/drive_rover.py] [--scheduler tcp://HOST:8786]
 
 Each seed is a full in-process mission (sim.mission.run_mission) in a worker
 process; per-seed outputs land in `<out>/seed-N/`, the summary in
 `<out>/evaluation.{json,csv,md}` (atomic writes).  A failing seed is reported as
-an error row, never aborts the others.
+an error row, never aborts the others.  `--client` (a third-party client over the
+wire) and `--scheduler` (a Dask cluster) go through sim/backend.py.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ import time
 from pathlib import Path
 
 from drive_rover import add_home_by_option
+from sim.backend import add_backend_options, evaluate_tasks
 from sim.cli import add_shadows_option, parse_with_logging
 from sim.mission import TIME_LIMIT_S
 
@@ -193,6 +196,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=DEFAULT_OUT)
     add_home_by_option(p)
     add_shadows_option(p)
+    add_backend_options(p)
     p.add_argument("--no-progress", action="store_true")
     a = parse_with_logging(p, argv)
     try:
@@ -208,8 +212,17 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
-    res = evaluate(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress,
-                   shadows=a.shadows == "on", home_by=a.home_by)
+    if a.client or a.scheduler:  # another client and/or a Dask cluster: sim/backend.py
+        try:
+            res = evaluate_tasks(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress,
+                                 shadows=a.shadows == "on", home_by=a.home_by, client=a.client,
+                                 scheduler=a.scheduler)
+        except (ValueError, FileNotFoundError) as exc:
+            log.error("%s", exc)
+            return 2
+    else:
+        res = evaluate(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress,
+                       shadows=a.shadows == "on", home_by=a.home_by)
     log.info("\n%s", res["markdown"])
     log.info("wrote %s/evaluation.{json,csv,md} in %.0f s", a.out, res["meta"]["wall_s"])
     return 0
