@@ -264,9 +264,6 @@ def comparable(result: dict) -> dict:
 # ----------------------------------------------------------------------------- evaluations
 def add_backend_options(parser) -> None:
     """--client and --scheduler for sim.evaluate (and sim.sweep's --scheduler)."""
-    parser.add_argument("--client", default=None, metavar="PATH/drive_rover.py",
-                        help="evaluate a third-party starter-style client, unchanged, in its own process over the "
-                             "wire in real time (docs/evaluate-any-client.md); default: ours, in-process")
     add_scheduler_option(parser)
 
 

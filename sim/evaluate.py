@@ -2,13 +2,13 @@
 
     python -m sim.evaluate --seeds 0-19 [--world real|procedural:K|PNG] [--jobs 2]
                            [--time-limit S] [--out DIR]
-                           [--client PATH/drive_rover.py] [--scheduler tcp://HOST:8786]
+                           [--scheduler tcp://HOST:8786]
 
 Each seed is a full in-process mission (sim.mission.run_mission) in a worker
 process; per-seed outputs land in `<out>/seed-N/`, the summary in
 `<out>/evaluation.{json,csv,md}` (atomic writes).  A failing seed is reported as
-an error row, never aborts the others.  `--client` (a third-party client over the
-wire) and `--scheduler` (a Dask cluster) go through sim/backend.py.
+an error row, never aborts the others.  `--scheduler` (a Dask cluster) goes
+through sim/backend.py.
 """
 from __future__ import annotations
 
@@ -212,10 +212,10 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
-    if a.client or a.scheduler:  # another client and/or a Dask cluster: sim/backend.py
+    if getattr(a, "client", None) or a.scheduler:  # another client and/or a Dask cluster: sim/backend.py
         try:
             res = evaluate_tasks(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress,
-                                 shadows=a.shadows == "on", home_by=a.home_by, client=a.client,
+                                 shadows=a.shadows == "on", home_by=a.home_by, client=getattr(a, "client", None),
                                  scheduler=a.scheduler)
         except (ValueError, FileNotFoundError) as exc:
             log.error("%s", exc)
