@@ -33,7 +33,7 @@ log = logging.getLogger(__name__)
 PROJECT_DIR = Path(__file__).resolve().parent.parent
 CODE_DIRS = (".", "sim", "navigation", "evaluation", "replay")  # folders whose *.py make up the code fingerprint
 VOLATILE_KEYS = ("wall_s", "frames_per_s", "files")  # result fields that differ between identical runs
-MISSION_FILES = ("mission.png", "worldmap.npy")  # per-mission files shipped back from a worker
+MISSION_FILES = {"mission.png": "png", "worldmap.npy": "worldmap", "client.log": "client_log"}  # shipped back: file -> result["files"] key
 TABLE_HOOK = "_build_tables"  # a module function rebuilt after its constants change
 
 _WORLDS: dict = {}  # (spec, shadows) -> World, per worker process
@@ -249,7 +249,7 @@ def store_answer(answer: dict, out_dir) -> dict:
         tmp = path.with_name(f".{name}.tmp")
         tmp.write_bytes(data)
         os.replace(tmp, path)
-        paths[Path(name).stem if name != "mission.png" else "png"] = str(path)
+        paths[MISSION_FILES.get(name, name)] = str(path)
     paths["json"] = str(out_dir / "mission.json")
     result["files"] = paths
     write_json_atomic(out_dir / "mission.json", result)
@@ -264,6 +264,9 @@ def comparable(result: dict) -> dict:
 # ----------------------------------------------------------------------------- evaluations
 def add_backend_options(parser) -> None:
     """--client and --scheduler for sim.evaluate (and sim.sweep's --scheduler)."""
+    parser.add_argument("--client", default=None, metavar="PATH/drive_rover.py",
+                        help="evaluate a third-party starter-style client, unchanged, in its own process over the "
+                             "wire in real time (docs/evaluate-any-client.md); default: ours, in-process")
     add_scheduler_option(parser)
 
 
@@ -282,6 +285,10 @@ def evaluate_tasks(seeds, world_spec="default", jobs=2, time_limit=900.0, out="o
 
     if client:
         client = str(Path(client).resolve())
+        if not Path(client).is_file():
+            raise FileNotFoundError(f"--client: no such file {client}")
+        log.info("third-party client missions run in real time: about %.0f s of wall time per seed at most",
+                 time_limit)
     fp = code_fingerprint()
     tasks = [MissionTask(seed=s, world=world_spec, shadows=shadows, time_limit=time_limit, home_by=home_by,
                          client=client, fingerprint=fp) for s in seeds]
@@ -294,7 +301,7 @@ def evaluate_tasks(seeds, world_spec="default", jobs=2, time_limit=900.0, out="o
     world_name = next((r.get("world") for r in results if r.get("world")), world_spec)
     meta = {"world": world_name, "seeds": f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0]),
             "count": len(seeds), "shadows": "on" if shadows else "off", "jobs": jobs, "time_limit_s": time_limit,
-            "home_by_s": home_by, "client": client or "ours (in-process)", "backend": scheduler or "local",
+            "home_by_s": home_by, "client": client, "backend": scheduler or "local",
             "code": fp, "wall_s": round(time.perf_counter() - t0, 1)}
     md = write_outputs(out, results, summary, meta)
     return {"meta": meta, "summary": summary, "missions": results, "markdown": md}

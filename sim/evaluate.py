@@ -2,13 +2,13 @@
 
     python -m sim.evaluate --seeds 0-19 [--world real|procedural:K|PNG] [--jobs 2]
                            [--time-limit S] [--out DIR]
-                           [--scheduler tcp://HOST:8786]
+                           [--client PATH/drive_rover.py] [--scheduler tcp://HOST:8786]
 
 Each seed is a full in-process mission (sim.mission.run_mission) in a worker
 process; per-seed outputs land in `<out>/seed-N/`, the summary in
 `<out>/evaluation.{json,csv,md}` (atomic writes).  A failing seed is reported as
-an error row, never aborts the others.  `--scheduler` (a Dask cluster) goes
-through sim/backend.py.
+an error row, never aborts the others.  `--client` (a third-party client, over
+the wire in real time) and `--scheduler` (a Dask cluster) go through sim/backend.py.
 """
 from __future__ import annotations
 
@@ -146,6 +146,8 @@ def write_outputs(out: Path, results, summary, meta):
     md = (f"# Twin evaluation: world {meta['world']}, shadows {meta.get('shadows', 'on')}, seeds {meta['seeds']}, "
           f"time limit {meta['time_limit_s']:.0f} s"
           + (f", client home by {meta['home_by_s']:.0f} s" if meta.get("home_by_s") else "")
+          + (f", client {meta['client']}" if meta.get("client") else "")
+          + (f", Dask scheduler {meta['backend']}" if meta.get("backend", "local") != "local" else "")
           + "\n\n" + markdown_table(results, summary))
     _write_text_atomic(out / "evaluation.md", md)
     return md
@@ -212,10 +214,10 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
-    if getattr(a, "client", None) or a.scheduler:  # another client and/or a Dask cluster: sim/backend.py
+    if a.client or a.scheduler:  # another client and/or a Dask cluster: sim/backend.py
         try:
             res = evaluate_tasks(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress,
-                                 shadows=a.shadows == "on", home_by=a.home_by, client=getattr(a, "client", None),
+                                 shadows=a.shadows == "on", home_by=a.home_by, client=a.client,
                                  scheduler=a.scheduler)
         except (ValueError, FileNotFoundError) as exc:
             log.error("%s", exc)
