@@ -13,8 +13,8 @@ code:
 * a 1 m cell is seen once any such pixel lands in it;
 * only cells that are navigable in the world's ``nav_truth`` score.
 
-It is an upper bound for any client driving the same path (a client still has
-to classify what it saw), which is what a reward for exploration should be.
+It is roughly the most any client could map on the same path (a client still
+has to classify what it saw), which is what a reward for exploration should be.
 """
 from __future__ import annotations
 

@@ -3,7 +3,8 @@
     python -m rover_gym.demo [--steps 1500] [--world default] [--seed 0] [--shadows off|on]
                              [--out out/gym-demo.png]
 
-Prints the episode's reward split (mapping, samples, home) and writes the env's
+Prints the episode's reward, the truth floor the camera saw (the mapping reward's
+measure) beside the mapped / fidelity figures of the client's own map, and writes the env's
 `render()` image (camera | map of the floor seen so far and the path) at the end.
 """
 from __future__ import annotations
@@ -40,8 +41,13 @@ def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=False, timing
             break
     image = env.render()
     env.close()
+    from evaluation.metrics import score_map
+
+    client_map = score_map(policy.worldmap, env.unwrapped.world.nav_truth)
     summary = {"steps": n, "sim_time_s": round(info["sim_time"], 2), "reward": round(total, 2),
-               "seen_truth_pct": round(info["seen_truth_pct"], 1), "collected": info["collected"],
+               "seen_truth_pct": round(info["seen_truth_pct"], 1),
+               "client_mapped_pct": round(client_map.mapped_pct, 1), "client_fidelity_pct": round(client_map.fidelity_pct, 1),
+               "collected": info["collected"],
                "samples": info["samples"], "terminated": terminated, "truncated": truncated,
                "end_reason": info["end_reason"] or "step budget"}
     return summary, image
