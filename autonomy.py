@@ -30,6 +30,8 @@ MAX_BRAKE = 10.0  # brake clamp (simulator does not clamp), brake units
 SAFE_STOP = {"throttle": 0.0, "brake": 1.0, "steer": 0.0}  # command for bad frames
 LOG_EVERY_S = 5.0  # the same warning is logged at most once per this many seconds
 RESET_JUMP_M = 20.0  # a position jump this large between frames means the simulator restarted, m
+TELEPORT_SPEED_M_S = 5.0  # fastest the rover moves (the simulator clamps at 5 m/s), m/s
+TELEPORT_SLACK_M = 2.0  # jump allowed on top of speed x elapsed time (queueing jitter between frames), m
 SAMPLE_MATCH_M = 0.1  # a reported sample farther than this from every known one is new, m
 NUMBER_FORMAT = "{:.4f}"  # plain decimal with '.', as the simulator's float.Parse expects
 
@@ -130,6 +132,7 @@ class AutonomyClient:
         self.bad_frames = 0  # telemetry frames answered with a safe stop
         self.episodes = 1  # missions seen (a simulator restart starts a new one)
         self._last_sim_time: Optional[float] = None
+        self._last_frame_time: Optional[float] = None  # _now() of the last handled frame, s
         self.step_errors = 0  # exceptions caught from perception/decision/insets
 
     # -- helpers --------------------------------------------------------------
@@ -162,9 +165,10 @@ class AutonomyClient:
                 and tel.sample_count > r.samples_remaining:
             return f"sample_count rose from {r.samples_remaining} to {tel.sample_count}"
         x, y = r.pos
-        if math.isfinite(x) and math.isfinite(y) and \
-                math.hypot(tel.pos[0] - x, tel.pos[1] - y) > RESET_JUMP_M:
-            return f"position jumped from ({x:.1f}, {y:.1f}) to ({tel.pos[0]:.1f}, {tel.pos[1]:.1f})"
+        if math.isfinite(x) and math.isfinite(y):
+            jump = math.hypot(tel.pos[0] - x, tel.pos[1] - y)
+            if jump > RESET_JUMP_M or jump > self._teleport_limit(tel):
+                return f"position jumped from ({x:.1f}, {y:.1f}) to ({tel.pos[0]:.1f}, {tel.pos[1]:.1f})"
         known_x, known_y = r.samples_pos
         if len(known_x) and len(tel.samples_xy):
             dx = tel.samples_xy[:, 0:1] - np.asarray(known_x)[None, :]
@@ -172,6 +176,17 @@ class AutonomyClient:
             if (np.hypot(dx, dy).min(axis=1) > SAMPLE_MATCH_M).any():
                 return "a sample appeared where none was"
         return None
+
+    def _teleport_limit(self, tel: sf.Telemetry) -> float:
+        """The farthest the rover can have driven since the last frame: a restart
+        near the start (same samples, under RESET_JUMP_M away) still jumps
+        farther than that, because the rover is put back at once."""
+        if self._last_frame_time is None:
+            return math.inf
+        elapsed = self._now(tel) - self._last_frame_time
+        if not math.isfinite(elapsed) or elapsed < 0:
+            return math.inf
+        return TELEPORT_SLACK_M + TELEPORT_SPEED_M_S * elapsed
 
     def _new_mission(self, reason: str):
         log.warning("simulator restarted (%s): starting a new mission", reason)
@@ -213,8 +228,10 @@ class AutonomyClient:
         if reason:
             self._new_mission(reason)
             rover = self.rover
-        sf.update_rover(rover, tel, self._now(tel))
+        now = self._now(tel)
+        sf.update_rover(rover, tel, now)
         self._last_sim_time = tel.sim_time
+        self._last_frame_time = now
 
         t = time.perf_counter()
         try:

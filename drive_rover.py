@@ -42,11 +42,10 @@ DEFAULT_PORT = 4567  # the port hard-coded in the simulator
 SOCKETIO_RANGE = ((4, 0, 0), (4, 99, 99))  # accepted python-socketio versions, inclusive
 ENGINEIO_RANGE = ((3, 9, 0), (3, 13, 2))  # accepted python-engineio: >= 3.9.0 (CVE-2019-13611 fix), <= 3.13.2 (3.14 rejects the sim)
 FIX_COMMAND = 'pip install "python-socketio==4.6.1" "python-engineio==3.13.2"'  # the fix we print
-PING_INTERVAL_S = 25  # Engine.IO ping interval announced in the handshake, s
-PING_TIMEOUT_S = 60  # Engine.IO ping timeout, s
 RECORD_QUEUE_FRAMES = 256  # frames buffered for the recorder thread before dropping, frames
 RECORD_JOIN_TIMEOUT_S = 10.0  # time allowed to flush the recorder at exit, s
-LIB_LOG_LEVEL = logging.WARNING  # socketio/engineio loggers (INFO logs every packet)
+RECORD_ERRORS_LOGGED = 3  # recorder write errors logged in full before only every RECORD_ERROR_LOG_EVERY-th
+RECORD_ERROR_LOG_EVERY = 1000  # then one log line per this many failed frames, frames
 SAVE_MAP_EVERY_FRAMES = 100  # --save-map: telemetry frames between worldmap dumps (plus one at exit), frames
 
 
@@ -131,115 +130,93 @@ class Recorder:
                 return
             try:
                 self.writer.write(*row[:-1], when=row[-1])
-            except Exception:
+            except Exception as exc:  # a full disk: the frame is lost, no litter is left (safe_write)
                 self.errors += 1
-                if self.errors <= 3:
-                    log.exception("recording a frame failed")
+                if self.errors <= RECORD_ERRORS_LOGGED or self.errors % RECORD_ERROR_LOG_EVERY == 0:
+                    log.warning("recording a frame failed (%d so far): %s", self.errors, exc)
 
     def close(self):
         self._queue.put(None)
         self._thread.join(RECORD_JOIN_TIMEOUT_S)
         self.writer.close()
-        log.info("recorded %d frames into %s (%d dropped)", self.writer.frames,
-                 self.folder, self.dropped)
+        log.info("recorded %d frames into %s (%d dropped, %d failed to write)", self.writer.frames,
+                 self.folder, self.dropped, self.errors)
 
 
 class MapSaver:
     """``--save-map``: dumps ``rover.worldmap`` as .npy every few frames and at exit,
-    so a mission scorer (or a user) can read the map of a live run; each write is
-    atomic (temp file + rename), so a reader never sees half a file."""
+    so a mission scorer (or a user) can read the map of a live run.  Each write
+    is atomic and leaves no temp file when it fails (safe_write), and the
+    target is checked up front (``check_map_target``): a folder, or a file that
+    is not a NumPy .npy file, is refused rather than replaced."""
 
     def __init__(self, path, every: int = SAVE_MAP_EVERY_FRAMES):
-        self.path = Path(path).expanduser()
+        self.path = check_map_target(path)
         self.every = max(1, int(every))
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._failed = False
+        self._failing = False
 
     def maybe_save(self, rover) -> None:
         if rover.frame_count % self.every == 0:
             self.save(rover)
 
     def save(self, rover) -> None:
-        import numpy as np
+        import io
 
-        tmp = self.path.with_name(f".{self.path.name}.tmp")
+        import numpy as np
+        from safe_write import atomic_write
+
+        buf = io.BytesIO()
+        np.save(buf, np.asarray(rover.worldmap))
         try:
-            with open(tmp, "wb") as fh:
-                np.save(fh, np.asarray(rover.worldmap))
-            os.replace(tmp, self.path)
+            atomic_write(self.path, buf.getvalue())
         except OSError as exc:  # a full disk must not stop the rover
-            if not self._failed:
-                log.warning("cannot write the worldmap to %s: %s", self.path, exc)
-            self._failed = True
+            if not self._failing:
+                log.warning("cannot write the worldmap to %s: %s (will keep trying)", self.path, exc)
+            self._failing = True
+            return
+        if self._failing:
+            log.info("worldmap written to %s again", self.path)
+        self._failing = False
+
+
+NPY_MAGIC = b"\x93NUMPY"  # first bytes of every .npy file
+
+
+def check_map_target(path) -> Path:
+    """The ``--save-map`` path, or ValueError saying why it may not be written:
+    it must end in .npy, must not be a folder, and an existing file there must
+    be a .npy file (we replace our own dumps, never anything else)."""
+    path = Path(path).expanduser()
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder; give a file name such as {path / 'worldmap.npy'}")
+    if path.suffix.lower() != ".npy":
+        raise ValueError(f"{path} does not end in .npy (the map is written with numpy.save)")
+    if path.exists() or path.is_symlink():
+        if not path.is_file():
+            raise ValueError(f"{path} exists and is not a regular file; refusing to replace it")
+        try:
+            with open(path, "rb") as fh:
+                head = fh.read(len(NPY_MAGIC))
+        except OSError as exc:
+            raise ValueError(f"{path} exists and cannot be read ({exc}); refusing to replace it") from None
+        if head != NPY_MAGIC and path.stat().st_size > 0:
+            raise ValueError(f"{path} exists and is not a NumPy .npy file; refusing to replace it")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"cannot create the folder {path.parent}: {exc}") from None
+    return path
 
 
 # --------------------------------------------------------------------------- server
 def build_server(client, recorder: Optional[Recorder] = None, map_saver: Optional[MapSaver] = None,
-                 dashboard=None):
+                 dashboard=None, hosts=()):
     """The Socket.IO server and WSGI app around ``client`` (an AutonomyClient);
-    ``dashboard`` (optional) gets ``observe(client, event)`` after every reply."""
-    import flask
-    import socketio
+    ``dashboard`` (optional) gets ``observe(client, event)`` after every handled
+    frame.  Sessions, packet guards and the Host check live in wire_server/wire_guard."""
+    import wire_server
 
-    from autonomy import SAFE_STOP, RateLimitedLog, command_payload
-
-    warn = RateLimitedLog(log)
-    lib_logger = logging.getLogger("drive_rover.socketio")
-    lib_logger.setLevel(logging.DEBUG if log.getEffectiveLevel() <= logging.DEBUG else LIB_LOG_LEVEL)
-
-    class SimulatorServer(socketio.Server):
-        """Socket.IO 4.x server that survives malformed packets and logs unknown
-        events (the simulator only ever sends ``telemetry``)."""
-
-        def _handle_eio_message(self, sid, data):
-            try:
-                return super()._handle_eio_message(sid, data)
-            except Exception as exc:
-                warn("garbage", "ignored malformed Socket.IO packet %r (%s)", str(data)[:80], exc)
-
-        def _trigger_event(self, event, namespace, *args):
-            if event not in ("connect", "disconnect") and \
-                    event not in self.handlers.get(namespace, {}):
-                warn("unknown-" + str(event)[:40], "ignored unknown event %r (no reply)",
-                     str(event)[:80])
-                return None
-            return super()._trigger_event(event, namespace, *args)
-
-    sio = SimulatorServer(async_mode="eventlet", async_handlers=False, logger=lib_logger,
-                          engineio_logger=lib_logger, ping_interval=PING_INTERVAL_S,
-                          ping_timeout=PING_TIMEOUT_S)
-
-    @sio.on("connect")
-    def on_connect(sid, environ):
-        log.info("simulator connected (%s, %s)", sid, environ.get("QUERY_STRING", ""))
-
-    @sio.on("disconnect")
-    def on_disconnect(sid):
-        log.info("simulator disconnected (%s)", sid)
-
-    @sio.on("telemetry")
-    def on_telemetry(sid, data=None, *extra):
-        try:
-            event, payload = client.handle_telemetry(data)
-        except Exception:  # handle_telemetry never raises; keep the lockstep anyway
-            log.exception("autonomy client raised")
-            stop = SAFE_STOP
-            event, payload = "data", command_payload(stop["throttle"], stop["brake"], stop["steer"])
-        if recorder is not None and event != "manual":
-            recorder.submit(client.last_telemetry)
-        if map_saver is not None and event != "manual":
-            map_saver.maybe_save(client.rover)
-        sio.emit(event, payload, room=sid)
-        if dashboard is not None:
-            dashboard.observe(client, event)
-
-    app = flask.Flask(__name__)
-
-    @app.route("/")
-    def index():
-        return "drive_rover: RoboND rover autonomy client. Start the simulator in Autonomous mode.\n"
-
-    return sio, socketio.WSGIApp(sio, app)
+    return wire_server.build_server(client, recorder, map_saver, hosts=hosts, dashboard=dashboard)
 
 
 def load_ground_truth_arg(value):
@@ -312,6 +289,10 @@ def main(argv=None) -> int:
     logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.INFO),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     require_compatible_versions()
+    try:
+        map_saver = MapSaver(args.save_map) if args.save_map else None
+    except ValueError as exc:
+        sys.exit(f"--save-map: {exc}")
     warnings.filterwarnings("ignore", message=r"\s*Eventlet is deprecated")  # documented in README
     import eventlet
     import eventlet.wsgi
@@ -324,10 +305,12 @@ def main(argv=None) -> int:
     except OSError as exc:
         sys.exit(f"cannot listen on {args.host}:{args.port}: {exc} "
                  f"(is another drive_rover.py running? pick another --port)")
-    recorder = Recorder(args.image_folder) if args.image_folder else None
+    try:
+        recorder = Recorder(args.image_folder) if args.image_folder else None
+    except (OSError, ValueError) as exc:
+        sys.exit(f"cannot record into {args.image_folder}: {exc}")
     if recorder is not None:
         log.info("recording into %s", recorder.folder)
-    map_saver = MapSaver(args.save_map) if args.save_map else None
     dashboard = None
     if args.dashboard:
         from dashboard import LiveDashboard
@@ -336,7 +319,7 @@ def main(argv=None) -> int:
             dashboard = LiveDashboard(args.dashboard_port, title="drive_rover").start()
         except OSError as exc:
             sys.exit(f"--dashboard-port: {exc}")
-    _, wsgi_app = build_server(client, recorder, map_saver, dashboard)
+    _, wsgi_app = build_server(client, recorder, map_saver, dashboard, hosts=(args.host,))
     host, port = listener.getsockname()[:2]
     log.info("listening on %s:%d; now start the simulator and choose Autonomous mode", host, port)
 

@@ -7,8 +7,9 @@ numbers use .NET's default float ``ToString`` (7 significant digits, ``E-07``
 style exponents), pitch/yaw/roll are raw 0..360 Unity angles.
 
 Writer: used by the live server and the twin.  It never deletes or overwrites
-anything (the simulator does: it wipes the folder), and every image lands
-atomically (temp file + ``os.replace``) so a crash never leaves half a JPEG.
+anything (the simulator does: it wipes the folder), every image lands
+atomically (temp file + ``os.replace``) so a crash never leaves half a JPEG, and
+a failed write (a full disk) leaves no temp file and no half row (safe_write.py).
 
 Reader: real logs found in the wild differ (``;`` or ``,``; CRLF, LF or CR-only
 line ends; absolute paths of other machines; corrupt fields such as ``___.01``;
@@ -23,11 +24,12 @@ import datetime as _dt
 import io
 import logging
 import math
-import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List, Optional
+
+from safe_write import AppendFile, atomic_write, remove_quietly
 
 log = logging.getLogger(__name__)
 
@@ -95,10 +97,15 @@ class LogWriter:
         self.img_dir = self.folder / IMG_DIR
         self.img_dir.mkdir(parents=True, exist_ok=True)
         self.log_path = self.folder / LOG_NAME
-        # newline="" keeps our explicit CRLF untouched on every OS
-        self._csv = open(self.log_path, "x", encoding="utf-8", newline="")
-        self._csv.write(SEPARATOR.join(COLUMNS) + LINE_END)
-        self._csv.flush()
+        # our own file (created exclusively), written a whole row at a time: a
+        # failed write (full disk) is cut back, never left half a row
+        self._csv = AppendFile(self.log_path, exclusive=True)
+        try:
+            self._csv.append((SEPARATOR.join(COLUMNS) + LINE_END).encode("utf-8"))
+        except OSError:
+            self._csv.close()
+            remove_quietly(self.log_path)  # empty and ours: no litter from a failed start
+            raise
         self._last_ms: Optional[int] = None
         self.frames = 0
         log.info("recording simulator log into %s", self.folder)
@@ -127,16 +134,15 @@ class LogWriter:
         if self._csv is None:
             raise ValueError("LogWriter is closed")
         name = self._frame_name(when)
-        final = self.img_dir / name
-        tmp = self.img_dir / f".{name}.tmp"
-        with open(tmp, "wb") as fh:
-            fh.write(bytes(jpeg_bytes))
-        os.replace(tmp, final)
+        final = atomic_write(self.img_dir / name, bytes(jpeg_bytes))  # no temp file left on failure
         values = [steer, throttle, brake, speed, x, y,
                   _angle_0_360(pitch), _angle_0_360(yaw), _angle_0_360(roll)]
         row = SEPARATOR.join([str(final)] + [format_float(v) for v in values])
-        self._csv.write(row + LINE_END)
-        self._csv.flush()
+        try:
+            self._csv.append((row + LINE_END).encode("utf-8"))
+        except BaseException:
+            remove_quietly(final)  # the frame we just wrote, without its row: keep log and IMG/ in step
+            raise
         self.frames += 1
         return final
 

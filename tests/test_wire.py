@@ -5,12 +5,6 @@ pings with ``2``, sends ``42["telemetry",{...}]`` with string values built
 from real test_dataset frames.  A python-socketio client would not do: it
 connects to servers the simulator cannot use (see socketio-compat.md)."""
 import base64
-import json
-import os
-import signal
-import socket
-import subprocess
-import sys
 import time
 import urllib.request
 from pathlib import Path
@@ -21,105 +15,9 @@ websocket = pytest.importorskip("websocket")
 
 import drive_rover  # noqa: E402
 from benchmarks.frame import sim_telemetry  # noqa: E402
+from wire_client import RECV_TIMEOUT_S, FakeSimulator, Server, assert_command  # noqa: E402
 
-PROJECT = Path(__file__).resolve().parents[1]
-START_TIMEOUT_S = 60.0  # server start-up allowance (imports on a busy 2-core box), s
-RECV_TIMEOUT_S = 20.0  # wait for one reply, s
-QUIET_S = 0.5  # silence that proves "no extra reply", s
 N_FRAMES = 12  # real frames sent per lockstep test
-
-
-def _free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Server:
-    """``python drive_rover.py`` in a subprocess; always shut down."""
-
-    def __init__(self, tmp_path, *extra):
-        self.port = _free_port()
-        self.log_path = tmp_path / f"server-{self.port}.log"
-        self._log = open(self.log_path, "wb")
-        self.proc = subprocess.Popen(
-            [sys.executable, str(PROJECT / "drive_rover.py"), *extra, "--port", str(self.port),
-             "--log-level", "INFO"], cwd=PROJECT, stdout=self._log, stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + START_TIMEOUT_S
-        while True:
-            if self.proc.poll() is not None:
-                raise AssertionError(f"server exited early:\n{self.output()}")
-            try:
-                socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    self.stop()
-                    raise AssertionError(f"server did not start:\n{self.output()}")
-                time.sleep(0.1)
-
-    def output(self):
-        self._log.flush()
-        return self.log_path.read_text(errors="replace")[-5000:]
-
-    def alive(self):
-        return self.proc.poll() is None
-
-    def stop(self):
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(10)
-        self._log.close()
-
-
-class FakeSimulator:
-    """The simulator's side of the socket, frame by frame."""
-
-    def __init__(self, port):
-        self.ws = websocket.create_connection(
-            f"ws://127.0.0.1:{port}/socket.io/?EIO=4&transport=websocket", timeout=RECV_TIMEOUT_S)
-        opening = self.ws.recv()
-        assert opening.startswith("0{"), opening
-        self.handshake = json.loads(opening[1:])
-        self.pongs = 0
-
-    def send_telemetry(self, data):
-        self.ws.send("42" + json.dumps(["telemetry", data]))
-
-    def recv_frame(self, timeout=RECV_TIMEOUT_S):
-        self.ws.settimeout(timeout)
-        return self.ws.recv()
-
-    def recv_event(self, timeout=RECV_TIMEOUT_S):
-        """Next event (name, payload); answers pings and skips 40/3 as the sim does."""
-        deadline = time.monotonic() + timeout
-        while True:
-            frame = self.recv_frame(max(0.01, deadline - time.monotonic()))
-            if frame == "2":
-                self.ws.send("3")
-            elif frame == "3":
-                self.pongs += 1
-            elif frame.startswith("42"):
-                name, *args = json.loads(frame[2:])
-                return name, (args[0] if args else None)
-            # '40' (namespace connect) and anything else are ignored, like the sim
-
-    def assert_quiet(self, quiet=QUIET_S):
-        """No further event arrives (lockstep: exactly one reply per telemetry)."""
-        with pytest.raises(websocket.WebSocketTimeoutException):
-            self.recv_event(timeout=quiet)
-
-    def close(self, polite=True):
-        try:
-            if polite:
-                self.ws.send("41")
-                self.ws.send("1")
-        finally:
-            self.ws.close()
 
 
 @pytest.fixture(scope="module")
@@ -143,21 +41,6 @@ def sim(server):
     s = FakeSimulator(server.port)
     yield s
     s.close(polite=False)
-
-
-def assert_command(name, payload):
-    assert name in ("data", "pickup", "manual"), name
-    assert isinstance(payload, dict)
-    for key, value in payload.items():
-        assert isinstance(value, str), (key, value)
-    if name == "data":
-        for key in ("throttle", "brake", "steering_angle"):
-            text = payload[key]
-            assert "," not in text
-            assert float(text) == float(text)  # parses, not NaN
-        assert abs(float(payload["steering_angle"])) <= 15.0
-    else:
-        assert payload == {}
 
 
 # --- protocol ------------------------------------------------------------------------
