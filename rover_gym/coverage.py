@@ -9,7 +9,8 @@ renderer's own ray hits (client-independent truth), not from any perception
 code:
 
 * a pixel sees floor when its ray hit terrain at floor height (not a wall face,
-  not a rock top, not sky) within ``SEEN_RANGE_M`` of the camera;
+  not a rock top, not sky) within ``SEEN_RANGE_M`` of the camera (distance along
+  the camera's forward axis, the renderer's depth);
 * a 1 m cell is seen once any such pixel lands in it;
 * only cells that are navigable in the world's ``nav_truth`` score.
 
@@ -26,16 +27,34 @@ PIXEL_STRIDE = 2  # use every n-th pixel row and column (a 1 m cell spans many p
 MAP_CELLS = 200  # truth map side, cells of 1 m
 
 
-def seen_floor_cells(hit_xyz: np.ndarray, depth: np.ndarray, seen_range_m: float = SEEN_RANGE_M,
-                     stride: int = PIXEL_STRIDE) -> np.ndarray:
-    """Flat indices (y * 200 + x) of the 1 m cells whose floor a frame saw within range.
+def hit_points(depth: np.ndarray, origin, rot, stride: int = PIXEL_STRIDE) -> np.ndarray:
+    """World (x, y, z) of every `stride`-th pixel's surface from the renderer's depth (nan for sky).
 
-    hit_xyz: (H, W, 3) world hit point per pixel (nan for sky), depth: (H, W) distance, m.
+    depth is the distance along each ray over |forward| (sim.render's `last_depth`), so a pixel's
+    hit is origin + depth * (a * right + b * up + forward) with a, b its pinhole ray slopes.
     """
-    hit = hit_xyz[::stride, ::stride]
-    dist = depth[::stride, ::stride]
+    from sim.render import CX, CY, FOCAL_PX
+
+    h, w = depth.shape
+    a = (np.arange(0, w, stride) + 0.5 - CX) / FOCAL_PX
+    b = (CY - (np.arange(0, h, stride) + 0.5)) / FOCAL_PX
+    rot = np.asarray(rot, np.float64)
+    dirs = rot[:, 0] * a[None, :, None] + rot[:, 1] * b[:, None, None] + rot[:, 2]
+    d = depth[::stride, ::stride].astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        hit = np.asarray(origin, np.float64) + d[..., None] * dirs
+    hit[~np.isfinite(d)] = np.nan
+    return hit
+
+
+def seen_floor_cells(hit: np.ndarray, dist: np.ndarray, seen_range_m: float = SEEN_RANGE_M) -> np.ndarray:
+    """Flat indices (y * 200 + x) of the 1 m cells whose floor these pixels saw within range.
+
+    hit: (..., 3) world hit points (nan for sky), dist: (...) their distance from the camera, m.
+    """
     z = hit[..., 2]
-    ok = np.isfinite(z) & (z <= FLOOR_HIT_MAX_Z_M) & (dist <= seen_range_m)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(z) & (z <= FLOOR_HIT_MAX_Z_M) & (dist <= seen_range_m)
     if not ok.any():
         return np.zeros(0, np.int64)
     cx = np.clip(np.floor(hit[..., 0][ok]).astype(np.int64), 0, MAP_CELLS - 1)
@@ -55,9 +74,10 @@ class CameraCoverage:
     def reset(self) -> None:
         self.seen[:] = False
 
-    def update(self, hit_xyz, depth) -> int:
-        """Mark this frame's seen floor; returns how many truth-navigable cells are newly seen."""
-        cells = seen_floor_cells(hit_xyz, depth, self.seen_range_m)
+    def update(self, depth, origin, rot) -> int:
+        """Mark a frame's seen floor (renderer depth + camera); returns how many truth-navigable cells are new."""
+        cells = seen_floor_cells(hit_points(depth, origin, rot), depth[::PIXEL_STRIDE, ::PIXEL_STRIDE],
+                                 self.seen_range_m)
         fresh = cells[~self.seen[cells]]
         self.seen[fresh] = True
         return int(np.count_nonzero(self.truth[fresh]))

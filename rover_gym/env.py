@@ -280,7 +280,8 @@ class RoverTwinEnv(gym.Env):
 
     def _see(self) -> int:
         r = self.twin._renderer
-        return self.coverage.update(r.last_hit, r.last_depth)
+        origin, rot = r.camera(self.twin.pose())  # the camera of the frame just rendered
+        return self.coverage.update(r.last_depth, origin, rot)
 
     def _home(self, truth) -> bool:
         n = len(truth.initial_samples)
