@@ -17,9 +17,13 @@ kinematic bicycle for heading, with every constant fitted to the real recordings
 * pitch/roll = terrain attitude under the wheels + a damped spring driven by the
   longitudinal and lateral acceleration (~1.2 deg accelerating, ~1.4 deg in a
   full-lock turn at 5 m/s);
-* collisions against a precomputed 0.1 m raster of rock slabs in the body's
-  height band and of too-steep terrain: the leading bumper points stop the rover
-  (speed 0), so it can get stuck but can always reverse or turn out.
+* contact as the real rigid body has it (sim/contact.py holds the geometry): four
+  ray-cast wheels stand on the floor plane, terrain or a rock top their ray reaches,
+  and set pitch and roll; the body collides only through its plates and axle rods,
+  against the rocks' collider shapes and the terrain.  Overlap is resolved by pushing
+  the body out (turning in place is never refused, backing away from a face is never
+  opposed), the approach speed is removed with a little rebound, and a hard hit kicks
+  the nose up.
 """
 from __future__ import annotations
 
@@ -27,6 +31,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from sim import contact as C
 
 PHYSICS_DT = 0.02  # s, Unity fixed timestep
 GRAVITY = 9.81  # m/s^2
@@ -39,6 +45,8 @@ DRAG_LINEAR = 0.052  # m/s^2 per m/s, speed-proportional resistance
 BRAKE_DECEL = 2.5  # m/s^2 per unit brake (brake is not clamped, as in the sim)
 MAX_FORWARD_SPEED = 5.0  # m/s, hard clamp (RoverController.moveSpeed)
 MAX_REVERSE_SPEED = 2.0  # m/s, hard clamp (maxReverseSpeed)
+STATIC_HOLD_ACCEL = 1.0  # m/s^2, a standing rover with no throttle does not start rolling on slopes gentler than
+# this along its heading (~6 deg; megalphian stands still at 3-3.6 deg of pitch for seconds)
 INPUT_LIMIT = 1000.0  # |throttle|, |brake| beyond this change nothing (speed is capped) and would overflow
 
 # --- steering -------------------------------------------------------------------
@@ -58,20 +66,23 @@ ATTITUDE_OMEGA = 8.0  # rad/s, natural frequency of the body-attitude spring
 ATTITUDE_DAMPING = 0.6  # damping ratio of the body-attitude spring
 MAX_DYNAMIC_PITCH = 5.0  # deg, clamp of the motion-induced pitch
 MAX_DYNAMIC_ROLL = 6.0  # deg, clamp of the motion-induced roll
-PITCH_PROBE_M = 0.40  # m, half distance of the front/rear terrain probes
-ROLL_PROBE_M = 0.40  # m, half distance of the left/right terrain probes
 TURN_PITCH_FADE_DEG_S = 25.0  # deg/s of yaw rate at which acceleration pitch has faded out (log: ~0 in hard turns)
 ATTITUDE_ACCEL_CLAMP = 3.0  # m/s^2, accelerations beyond this (impacts) do not tilt further
 
-# --- collision ------------------------------------------------------------------------
-COLLISION_CELL_M = 0.1  # m, raster cell (same grid as the rock envelopes)
-BODY_BOTTOM_M = 0.06  # m above ground, lowest part of the body that can hit a rock
-BODY_TOP_M = 0.60  # m above ground, highest part of the body
-MAX_SLOPE_DEG = 40.0  # deg, terrain steeper than this is a wall
-BUMPER_FRONT_M = 0.55  # m ahead of the rover origin
-BUMPER_REAR_M = 0.50  # m behind the rover origin
-BUMPER_HALF_WIDTH_M = 0.42  # m, half body width
-HEIGHT_ROWS_PER_CHUNK = 250  # rows of the 0.1 m grid evaluated per height_at call
+# --- contact response (geometry in sim/contact.py) -----------------------------------------
+RESTITUTION = 0.3  # share of the approach speed returned on a hard hit (real rebounds -0.2..-1.8 m/s)
+REBOUND_MIN_SPEED = 0.5  # m/s, slower approaches just stop against the face
+IMPACT_PITCH_GAIN = 80.0  # deg/s of pitch rate per m/s of approach speed (nose up on a frontal hit)
+IMPACT_OMEGA = 7.0  # rad/s, natural frequency of the impact pitch transient
+IMPACT_DAMPING = 0.5  # damping ratio of the impact pitch transient
+MAX_IMPACT_PITCH = 40.0  # deg, clamp of the impact pitch (real hits: 16-36 deg)
+CONTACT_ITERATIONS = 4  # push-out passes per physics step
+CONTACT_SLOP_M = 0.001  # m pushed beyond the measured overlap
+MAX_PUSH_M = 0.3  # m, largest push-out in one pass
+TERRAIN_SLOPE_PROBE_M = 0.1  # m, half distance of the terrain-gradient probe at a contact
+SIDE_GRIP = 1.0  # tan of the steepest roll the tyres hold without sliding sideways (sideways friction
+# asymptote 1.0; a real rover drove 27 m at up to 38 deg of roll)
+MIN_WALL_TAN = 0.25  # terrain contacts on gentler slopes push out at most overlap / this
 
 
 @dataclass
@@ -101,75 +112,18 @@ class BodyState:
     collided: bool = False  # last step hit something
     fixed_turn_left: float = 0.0  # deg still to turn in a fixed_turn (signed, + = CCW)
     fixed_turn_rate: float = 0.0  # deg/s of the running fixed_turn (signed)
+    pitch_impact: float = 0.0  # deg, transient pitch from hitting something (negative = nose up)
+    pitch_impact_rate: float = 0.0
+    impact_speed: float = 0.0  # m/s, approach speed of the last hit (0 when none this step)
+    v_side: float = 0.0  # m/s, sideways slide down a slope too steep for the tyres (+ = to the left)
 
     @property
     def pitch(self) -> float:
-        return self.pitch_terrain + self.pitch_dyn
+        return self.pitch_terrain + self.pitch_dyn + self.pitch_impact
 
     @property
     def roll(self) -> float:
         return self.roll_terrain + self.roll_dyn
-
-
-# ------------------------------------------------------------------ collision raster
-def _bumper_points():
-    """Rover-frame (forward, left) points, grouped as front / rear / sides."""
-    w = BUMPER_HALF_WIDTH_M
-    front = [(BUMPER_FRONT_M, -w), (BUMPER_FRONT_M, 0.0), (BUMPER_FRONT_M, w),
-             (BUMPER_FRONT_M, -w / 2), (BUMPER_FRONT_M, w / 2)]
-    rear = [(-BUMPER_REAR_M, -w), (-BUMPER_REAR_M, 0.0), (-BUMPER_REAR_M, w)]
-    sides = [(0.25, -w), (0.25, w), (-0.2, -w), (-0.2, w)]
-    pts = np.array(front + rear + sides, dtype=np.float64)
-    front_mask = np.zeros(len(pts), bool)
-    front_mask[: len(front)] = True
-    front_mask[len(front) + len(rear):][[0, 1]] = True  # forward side points lead too
-    rear_mask = np.zeros(len(pts), bool)
-    rear_mask[len(front): len(front) + len(rear)] = True
-    rear_mask[len(front) + len(rear):][[2, 3]] = True
-    return pts, front_mask, rear_mask
-
-
-BUMPER_POINTS, FRONT_MASK, REAR_MASK = _bumper_points()
-
-
-def build_blocked_raster(world) -> np.ndarray:
-    """Bool raster on the 0.1 m vertex grid, True where the rover body cannot be.
-
-    Blocked: a rock slab overlapping [ground + BODY_BOTTOM_M, ground + BODY_TOP_M],
-    terrain steeper than MAX_SLOPE_DEG, or the world border.
-    """
-    n = int(round(world.size_m / COLLISION_CELL_M)) + 1
-    coords = np.arange(n) * COLLISION_CELL_M
-    ground = np.empty((n, n), np.float32)
-    for r0 in range(0, n, HEIGHT_ROWS_PER_CHUNK):
-        ys = coords[r0:r0 + HEIGHT_ROWS_PER_CHUNK]
-        gx, gy = np.meshgrid(coords, ys)
-        ground[r0:r0 + len(ys)] = world.height_at(gx, gy)
-    top = np.asarray(world.rock_top, np.float32)
-    bottom = np.asarray(world.rock_bottom, np.float32)
-    if top.shape != (n, n):  # a world on another grid: sample it at our vertices
-        import cv2
-
-        top = cv2.resize(top, (n, n), interpolation=cv2.INTER_NEAREST)
-        bottom = cv2.resize(bottom, (n, n), interpolation=cv2.INTER_NEAREST)
-    rock = (top > 0) & (bottom <= ground + BODY_TOP_M) & (top >= ground + BODY_BOTTOM_M)
-    gy_, gx_ = np.gradient(ground.astype(np.float64), COLLISION_CELL_M)
-    steep = np.hypot(gx_, gy_) > math.tan(math.radians(MAX_SLOPE_DEG))
-    blocked = rock | steep
-    blocked[0, :] = blocked[-1, :] = blocked[:, 0] = blocked[:, -1] = True
-    return blocked
-
-
-def blocked_raster_for(world) -> np.ndarray:
-    """The world's collision raster, built once per World object and cached on it."""
-    cached = getattr(world, "_twin_blocked_raster", None)
-    if cached is None:
-        cached = build_blocked_raster(world)
-        try:
-            setattr(world, "_twin_blocked_raster", cached)
-        except AttributeError:  # a frozen/slotted world: just do not cache
-            pass
-    return cached
 
 
 # ------------------------------------------------------------------ helpers
@@ -198,6 +152,8 @@ def yaw_rate_deg(steer_cmd: float, speed: float, throttle: float, brake: float,
 def longitudinal_step(v: float, throttle: float, brake: float, slope_sin: float, dt: float) -> float:
     """New speed: drive and gravity push, drag and brake only ever bring v toward 0."""
     push = throttle * (DRIVE_ACCEL - DRIVE_FADE * abs(v)) + GRAVITY * slope_sin
+    if v == 0.0 and throttle == 0.0 and abs(GRAVITY * slope_sin) < STATIC_HOLD_ACCEL:
+        return 0.0
     v_new = v + push * dt
     resist = (DRAG_CONST + DRAG_LINEAR * abs(v_new) + BRAKE_DECEL * max(0.0, brake)) * dt
     if abs(v_new) <= resist:
@@ -213,36 +169,111 @@ class RoverPhysics:
 
     def __init__(self, world, x: float, y: float, yaw: float):
         self.world = world
-        self.blocked = blocked_raster_for(world)
-        self._n = self.blocked.shape[0] - 1
+        self.rocks = C.rock_field_for(world)
         self.state = BodyState(float(x), float(y), float(yaw) % 360.0)
+        self._wheel_f = np.array(C.WHEEL_F_M)
+        self._wheel_l = np.array(C.WHEEL_L_M)
+        self._wheel_h = self._ground_at(*self._to_world(x, y, yaw, self._wheel_f, self._wheel_l))
+        self._wheel_h = self._wheel_heights(x, y, yaw)
         self._update_terrain_attitude()
 
-    # -- queries ----------------------------------------------------------------
-    def _points_world(self, x, y, yaw_deg):
+    # -- geometry ---------------------------------------------------------------
+    @staticmethod
+    def _to_world(x, y, yaw_deg, f, lat):
         c, s = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
-        px = x + BUMPER_POINTS[:, 0] * c - BUMPER_POINTS[:, 1] * s
-        py = y + BUMPER_POINTS[:, 0] * s + BUMPER_POINTS[:, 1] * c
-        return px, py
+        return x + f * c - lat * s, y + f * s + lat * c
 
-    def blocked_points(self, x, y, yaw_deg) -> np.ndarray:
-        """Bool per bumper point: inside a blocked raster cell."""
-        px, py = self._points_world(x, y, yaw_deg)
-        c = np.clip(np.rint(px / COLLISION_CELL_M).astype(np.int64), 0, self._n)
-        r = np.clip(np.rint(py / COLLISION_CELL_M).astype(np.int64), 0, self._n)
-        return self.blocked[r, c]
+    def _ground_at(self, px, py):
+        """What a wheel ray always finds: the terrain or the floor plane 1 cm above it."""
+        return np.maximum(np.asarray(self.world.height_at(px, py), dtype=np.float64), C.FLOOR_PLANE_M)
+
+    def _wheel_heights(self, x, y, yaw_deg) -> np.ndarray:
+        """Contact height under each wheel: ground, or a rock top the wheel's ray reaches from where it stood."""
+        wx, wy = self._to_world(x, y, yaw_deg, self._wheel_f, self._wheel_l)
+        h = self._ground_at(wx, wy)
+        near = self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1)
+        if near:
+            _, top, _, _, _ = C.RockField.query(near, wx, wy)
+            found = (top > h) & (top <= self._wheel_h + C.WHEEL_REACH_M)
+            h = np.where(found, top, h)
+        return h
+
+    @staticmethod
+    def _plane(wheel_h):
+        """(height at the root, slope forward, slope left) of the plane the four wheels define."""
+        front, rear = 0.5 * (wheel_h[0] + wheel_h[1]), 0.5 * (wheel_h[2] + wheel_h[3])
+        left, right = 0.5 * (wheel_h[0] + wheel_h[2]), 0.5 * (wheel_h[1] + wheel_h[3])
+        a = (front - rear) / C.WHEELBASE_M
+        b = (left - right) / C.TRACK_M
+        f_mid = 0.5 * (C.WHEEL_F_M[0] + C.WHEEL_F_M[2])
+        return 0.5 * (front + rear) - a * f_mid, a, b
+
+    def contacts(self, x, y, yaw_deg, wheel_h=None):
+        """Overlaps of the body colliders at a pose: (push distance, unit push x, unit push y) per touching point."""
+        if wheel_h is None:
+            wheel_h = self._wheel_heights(x, y, yaw_deg)
+        bp = C.BODY_POINTS
+        px, py = self._to_world(x, y, yaw_deg, bp[:, 0], bp[:, 1])
+        z0, a, b = self._plane(wheel_h)
+        plane = z0 + a * bp[:, 0] + b * bp[:, 1]
+        bottom, top = plane + bp[:, 2], plane + bp[:, 3]
+        depths, dxs, dys = [], [], []
+        terrain = np.asarray(self.world.height_at(px, py), dtype=np.float64)
+        over = terrain - bottom
+        hit = over > 0
+        if hit.any():  # terrain rising into a plate or rod: slide off it downhill (terrain friction is 0)
+            hx, hy, o = px[hit], py[hit], over[hit]
+            d = TERRAIN_SLOPE_PROBE_M
+            hs = np.asarray(self.world.height_at(np.concatenate([hx + d, hx - d, hx, hx]),
+                                                 np.concatenate([hy, hy, hy + d, hy - d])), dtype=np.float64)
+            k = len(hx)
+            gx, gy = (hs[:k] - hs[k:2 * k]) / (2 * d), (hs[2 * k:3 * k] - hs[3 * k:]) / (2 * d)
+            g = np.hypot(gx, gy)
+            ok = g > 1e-6
+            depths.append(o[ok] / np.maximum(g[ok], MIN_WALL_TAN))
+            dxs.append(-gx[ok] / g[ok])
+            dys.append(-gy[ok] / g[ok])
+        near = self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1)
+        if near:
+            rb, rt, rd, ex, ey = C.RockField.query(near, px, py)
+            hit = (rt > bottom) & (rb < top) & (rd > 0)
+            if hit.any():
+                depths.append(rd[hit])
+                dxs.append(ex[hit])
+                dys.append(ey[hit])
+        if not depths:
+            empty = np.zeros(0)
+            return empty, empty, empty
+        return np.concatenate(depths), np.concatenate(dxs), np.concatenate(dys)
+
+    def _resolve(self, x, y, yaw_deg):
+        """Push the body out of overlap (PhysX depenetration); returns (x, y, wheel heights, total push x, y)."""
+        push_x = push_y = 0.0
+        wheel_h = self._wheel_heights(x, y, yaw_deg)
+        for _ in range(CONTACT_ITERATIONS):
+            d, ex, ey = self.contacts(x, y, yaw_deg, wheel_h)
+            if d.size == 0:
+                break
+            vx, vy = float(np.sum(d * ex)), float(np.sum(d * ey))
+            n = math.hypot(vx, vy)
+            if n < 1e-9:  # pushes cancel (wedged): follow the deepest
+                i = int(np.argmax(d))
+                vx, vy, n = float(ex[i]), float(ey[i]), 1.0
+            step = min(float(d.max()) + CONTACT_SLOP_M, MAX_PUSH_M)
+            x += step * vx / n
+            y += step * vy / n
+            push_x += step * vx / n
+            push_y += step * vy / n
+            wheel_h = self._wheel_heights(x, y, yaw_deg)
+        return x, y, wheel_h, push_x, push_y
 
     def _update_terrain_attitude(self):
-        s = self.state
-        c, sn = math.cos(math.radians(s.yaw)), math.sin(math.radians(s.yaw))
-        px = np.array([s.x + PITCH_PROBE_M * c, s.x - PITCH_PROBE_M * c,
-                       s.x - ROLL_PROBE_M * sn, s.x + ROLL_PROBE_M * sn])
-        py = np.array([s.y + PITCH_PROBE_M * sn, s.y - PITCH_PROBE_M * sn,
-                       s.y + ROLL_PROBE_M * c, s.y - ROLL_PROBE_M * c])
-        h = self.world.height_at(px, py)
-        front, rear, left, right = (float(v) for v in h)
-        s.pitch_terrain = math.degrees(math.atan2(rear - front, 2 * PITCH_PROBE_M))  # nose down +
-        s.roll_terrain = math.degrees(math.atan2(right - left, 2 * ROLL_PROBE_M))  # right side up +
+        """Pitch and roll of the plane the wheels stand on."""
+        s, h = self.state, self._wheel_h
+        front, rear = 0.5 * (h[0] + h[1]), 0.5 * (h[2] + h[3])
+        left, right = 0.5 * (h[0] + h[2]), 0.5 * (h[1] + h[3])
+        s.pitch_terrain = math.degrees(math.atan2(rear - front, C.WHEELBASE_M))  # nose down +
+        s.roll_terrain = math.degrees(math.atan2(right - left, C.TRACK_M))  # right side up +
 
     # -- commands ---------------------------------------------------------------
     def start_fixed_turn(self, angle_deg: float, duration_s: float) -> bool:
@@ -267,6 +298,7 @@ class RoverPhysics:
     def step(self, controls: Controls, frozen: bool = False, dt: float = PHYSICS_DT):
         s = self.state
         s.collided = False
+        s.impact_speed = 0.0
         throttle = max(-INPUT_LIMIT, min(INPUT_LIMIT, float(controls.throttle)))
         brake = max(-INPUT_LIMIT, min(INPUT_LIMIT, float(controls.brake)))
         steer = clamp_steer(float(controls.steer))
@@ -287,27 +319,55 @@ class RoverPhysics:
             slope_sin = math.sin(math.radians(s.pitch_terrain))
             s.v = longitudinal_step(s.v, throttle, brake, slope_sin, dt)
             rate = yaw_rate_deg(steer, s.v, throttle, brake, s.reversing)
-        new_yaw = (s.yaw + rate * dt) % 360.0
+        new_yaw = (s.yaw + rate * dt) % 360.0  # yaw is applied to the transform: nothing refuses it
         mid = math.radians(s.yaw + 0.5 * rate * dt)
-        nx = s.x + s.v * math.cos(mid) * dt
-        ny = s.y + s.v * math.sin(mid) * dt
-        if s.v != 0.0:
-            lead = FRONT_MASK if s.v > 0 else REAR_MASK
-            if self.blocked_points(nx, ny, new_yaw)[lead].any():
-                s.collided = True
-                s.v = 0.0
-                nx, ny = s.x, s.y
-        if new_yaw != s.yaw:
-            before = int(self.blocked_points(s.x, s.y, s.yaw).sum())
-            if int(self.blocked_points(nx, ny, new_yaw).sum()) > before:
-                s.collided = True
-                new_yaw, rate = s.yaw, 0.0
-                s.fixed_turn_left = 0.0
+        self._side_slide(dt, frozen)
+        nx = s.x + (s.v * math.cos(mid) - s.v_side * math.sin(mid)) * dt
+        ny = s.y + (s.v * math.sin(mid) + s.v_side * math.cos(mid)) * dt
+        nx, ny, self._wheel_h, push_x, push_y = self._resolve(nx, ny, new_yaw)
+        if push_x or push_y:
+            self._respond(push_x, push_y, new_yaw)
         s.x, s.y, s.yaw = nx, ny, new_yaw
         s.yaw_rate = rate
         s.accel = (s.v - v0) / dt
         self._update_terrain_attitude()
         self._attitude_step(dt)
+
+    def _side_slide(self, dt: float, frozen: bool):
+        """Sideways slide where the roll exceeds what the tyres' side grip holds; grip stops it otherwise."""
+        s = self.state
+        roll = math.radians(s.roll_terrain)
+        downhill = math.copysign(1.0, roll)  # right side up: the slope falls to the left (+)
+        excess = GRAVITY * (math.sin(abs(roll)) - SIDE_GRIP * math.cos(abs(roll)))
+        if frozen:
+            s.v_side = 0.0
+        elif excess > 0.0:
+            s.v_side += downhill * excess * dt
+        else:
+            grip = -excess * dt
+            s.v_side = 0.0 if abs(s.v_side) <= grip else s.v_side - math.copysign(grip, s.v_side)
+
+    def _respond(self, push_x: float, push_y: float, yaw_deg: float):
+        """Velocity after a contact: the approach part is removed (with a rebound on a hard hit) and the
+        nose kicks up on a frontal hit (down when backing into something)."""
+        s = self.state
+        s.collided = True
+        n = math.hypot(push_x, push_y)
+        nx, ny = push_x / n, push_y / n
+        hx, hy = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+        along = hx * nx + hy * ny  # heading . normal: -1 head-on, +1 backing straight in
+        side = -hy * nx + hx * ny  # left . normal
+        if s.v_side * side < 0.0:  # sliding into the face: stop the slide
+            s.v_side = 0.0
+        vn = s.v * along
+        if vn >= 0.0:  # already moving away from the face
+            return
+        impact = -vn
+        e = RESTITUTION if impact > REBOUND_MIN_SPEED else 0.0
+        s.v -= (1.0 + e) * vn * along  # the wheels' side grip keeps only the heading component
+        s.impact_speed = impact
+        if impact > REBOUND_MIN_SPEED:
+            s.pitch_impact_rate += IMPACT_PITCH_GAIN * impact * along
 
     def _attitude_step(self, dt: float):
         s = self.state
@@ -323,4 +383,8 @@ class RoverPhysics:
         s.roll_rate += (w2 * (target_r - s.roll_dyn) - c * s.roll_rate) * dt
         s.roll_dyn += s.roll_rate * dt
         s.pitch_dyn = max(-MAX_DYNAMIC_PITCH, min(MAX_DYNAMIC_PITCH, s.pitch_dyn))
+        w2i, ci = IMPACT_OMEGA ** 2, 2 * IMPACT_DAMPING * IMPACT_OMEGA
+        s.pitch_impact_rate += (-w2i * s.pitch_impact - ci * s.pitch_impact_rate) * dt
+        s.pitch_impact += s.pitch_impact_rate * dt
+        s.pitch_impact = max(-MAX_IMPACT_PITCH, min(MAX_IMPACT_PITCH, s.pitch_impact))
         s.roll_dyn = max(-MAX_DYNAMIC_ROLL, min(MAX_DYNAMIC_ROLL, s.roll_dyn))

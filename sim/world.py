@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 import shared_data
+from sim.contact import load_collider_shapes
 from sim.procedural import canyon_world, world_from_map_png
 from sim.scene import (FLOOR_TOLERANCE_M, MAP_CELLS, ROCK_CELL_M, ROCK_SAMPLES, SAND_CELL_M, SAND_TEXELS,  # noqa: F401
                        TERRAIN_CELL_M, TERRAIN_SAMPLES, WORLD_SIZE_M, World, nav_truth_from_geometry)
@@ -56,12 +57,13 @@ def load_real_world(world_dir: Path | None = None) -> World:
     start = json.loads((world_dir / "start.json").read_text())
     samples = _read_samples_csv(world_dir / "samples.csv")
     obstacles = _read_obstacles_csv(world_dir / "obstacles.csv")
+    colliders = load_collider_shapes(world_dir) or None
     world = World(
         terrain_height=terrain, sand_weight=sand, rock_top=rock_top, rock_bottom=rock_bottom,
         nav_truth=np.zeros((MAP_CELLS, MAP_CELLS), np.uint8), sample_spots=samples,
         start_xy=(float(start["position_m"]["x"]), float(start["position_m"]["y"])),
         start_yaw_training=float(start["training_mode"]["telemetry_yaw_deg"]),
-        name="real", obstacles=obstacles,
+        name="real", obstacles=obstacles, rock_colliders=colliders,
     )
     gt_path = shared_data.ground_truth_map_path()
     if world_dir == shared_data.world_dir() and gt_path.exists():
