@@ -61,7 +61,7 @@ def engineio_frame_verdict(frame) -> Optional[str]:
     if not frame:
         return "empty frame"
     if frame[0] not in ENGINEIO_TYPES_PASSED:
-        return "base64 binary frame" if frame[0] == "b" else f"engine.io packet type {frame[0]!r}"
+        return "base64 binary frame" if frame[0] == "b" else "engine.io packet of another type"
     return None
 
 
@@ -131,7 +131,8 @@ def classify_message(text) -> Tuple[str, str]:
 
     The body of a telemetry event is returned undecoded: only the newest
     telemetry is ever decoded (``telemetry_argument``), so a backlog costs a
-    regex per frame."""
+    regex per frame.  Reasons come from a small fixed set (they key counters
+    and rate-limited logs, which must not grow with what a client invents)."""
     if not isinstance(text, str):
         return IGNORE, "binary Socket.IO message"
     if not text:
@@ -139,7 +140,7 @@ def classify_message(text) -> Tuple[str, str]:
     kind, body = text[0], text[1:]
     if kind != "2":
         name = _SOCKETIO_TYPE_NAMES.get(kind)
-        return IGNORE, (f"Socket.IO {name} packet" if name else f"Socket.IO packet type {kind!r}")
+        return IGNORE, (f"Socket.IO {name} packet" if name else "Socket.IO packet of unknown type")
     if body.startswith("/"):
         namespace, _, body = body.partition(",")
         if namespace != "/":
@@ -160,7 +161,7 @@ def classify_message(text) -> Tuple[str, str]:
         return IGNORE, "malformed event"
     if message[0] == "telemetry":  # spelled with escapes: still the simulator's event
         return TELEMETRY, body
-    return IGNORE, f"unknown event {message[0][:REASON_TEXT_CHARS]!r}"
+    return IGNORE, "unknown event"
 
 
 class BadTelemetry(ValueError):

@@ -176,11 +176,12 @@ class Session:
                 self._last_pause = now
                 self._pause()
         else:
-            self.ignore(detail)
+            self.ignore(detail, text)
 
-    def ignore(self, reason: str) -> None:
+    def ignore(self, reason: str, text=None) -> None:
         self.ignored[reason] += 1
-        self.driver.warn("ignored-" + reason, "ignored %s (no reply)", reason)
+        excerpt = "" if text is None else f" {str(text)[:wire_guard.REASON_TEXT_CHARS]!r}"
+        self.driver.warn("ignored-" + reason, "ignored %s%s (no reply)", reason, excerpt)
 
     # -- worker side ------------------------------------------------------------------
     def serve_once(self) -> int:
@@ -207,8 +208,12 @@ class Session:
         while not self.closed:
             self._wake.wait()
             self._wake.clear()
-            if not self.closed:
+            if self.closed:
+                break
+            try:
                 self.serve_once()
+            except Exception:  # a dead worker would leave every later telemetry unanswered
+                self.driver.warn("worker", "session worker error (continuing)", exc_info=True)
 
     def close(self) -> None:
         self.closed = True

@@ -406,3 +406,45 @@ def test_a_flooding_reader_steps_aside_for_the_worker():
     for i in range(100):
         session.on_message(_frame(i))
     assert 20 <= len(pauses) <= 30  # every ~20 ms of reading, not every frame
+
+
+def test_ignore_reasons_do_not_grow_with_invented_names():
+    texts = [f'2["event-{i}",{{}}]' for i in range(500)] + [f"{chr(0x4e00 + i)}" for i in range(500)]
+    reasons = {classify_message(t)[1] for t in texts}
+    frames = {wire_guard.engineio_frame_verdict(chr(0x4e00 + i)) for i in range(500)}
+    assert len(reasons) <= 2 and len(frames) == 1
+
+
+def test_session_worker_survives_an_error_and_keeps_answering():
+    sent = []
+
+    def send(event, payload):
+        if not sent:
+            sent.append("boom")
+            raise RuntimeError("socket went away mid-send")
+        sent.append(event)
+
+    class ScriptedWake:
+        """wait() feeds one frame per call, then closes the session."""
+
+        def __init__(self):
+            self.session, self.calls = None, 0
+
+        def wait(self):
+            self.calls += 1
+            if self.calls > 2:
+                self.session.close()
+            else:
+                self.session.mailbox.put(_frame(self.calls)[1:])
+
+        def clear(self):
+            pass
+
+        def set(self):
+            pass
+
+    wake = ScriptedWake()
+    session = Session("sid", Driver(CountingClient()), send, wake)
+    wake.session = session
+    session.run()
+    assert sent == ["boom", "data"]  # the second frame was answered after the first failed
