@@ -108,6 +108,11 @@ def _default_steps():
 class AutonomyClient:
     """Turns each telemetry dict into exactly one ``(event, payload)`` reply.
 
+    ``clock`` is the client's wall clock (seconds, any origin): drive_rover.py
+    uses ``time.monotonic`` because the real simulator sends no clock; the twin's
+    in-process runner injects its virtual clock (sim.timing.VirtualClock) so a
+    mission runs faster than real time and reproduces exactly.  Only the twin's
+    lockstep debugging loop sends ``sim_time``, which then overrides the clock.
     ``perception_step``/``decision_step`` default to the real modules; tests
     pass doubles.  ``last_timings`` holds the last frame's stage durations in
     milliseconds (keys in ``STAGES``) for the benchmark; ``last_telemetry`` the
@@ -146,6 +151,7 @@ class AutonomyClient:
         return "data", command_payload(s["throttle"], s["brake"], s["steer"])
 
     def _now(self, tel: sf.Telemetry) -> float:
+        """The mission clock for this frame: the lockstep twin's sim_time, else our own clock."""
         if tel.sim_time is not None:
             return tel.sim_time
         return self.clock()

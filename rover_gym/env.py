@@ -194,7 +194,8 @@ class RoverTwinEnv(gym.Env):
         self.max_episode_s = float(max_episode_s)
         self.pickup_guard = bool(pickup_guard)
         self._first_seed = None if seed is None else int(seed)
-        self.twin = RoverTwin(self.world, seed=self._first_seed or 0, render=True)
+        self.twin = RoverTwin(self.world, seed=self._first_seed or 0, render=True,
+                              sim_time_field=True)  # one env step = one lockstep frame; obs carry its clock
         self.coverage = CameraCoverage(self.world.nav_truth, seen_range_m)
         self.action_space = spaces.Box(np.array([-1.0, 0.0, -MAX_STEER_DEG, 0.0], np.float32),
                                        np.array([1.0, MAX_BRAKE, MAX_STEER_DEG, 1.0], np.float32),

@@ -1,12 +1,17 @@
 """Run one full mission of the autonomy client on the twin and score it.
 
     python -m sim.mission --seed N [--world real|procedural:K|PNG] [--time-limit S]
+                          [--timing unity|lockstep] [--fps 30] [--latency-ms MS] [--compute-ms MS]
                           [--video out.mp4] [--out DIR] [--record DIR] [--wire]
 
-Default: `AutonomyClient` in-process against `RoverTwin` (fast, simulated clock via
-the twin's `sim_time`).  `--wire`: `drive_rover.py` runs as a subprocess on a free
-port and the twin talks to it over the real Socket.IO wire protocol, exactly like
-the Unity program (lockstep).
+Default: `AutonomyClient` in-process against `RoverTwin` under the real simulator's
+loop (`--timing unity`, sim/timing.py): physics free-runs, each command acts at the
+first render frame after it arrives, no clock is sent and the client reads a
+virtual clock as its wall clock, so a mission is deterministic and much faster
+than real time.  `--timing lockstep` is the old, EASIER loop (one frame per
+command, the twin's `sim_time` clock).  `--wire`: `drive_rover.py` runs as a
+subprocess on a free port and the twin talks to it over the real Socket.IO wire
+protocol like the Unity program (real time under unity timing).
 
 Writes `<out>/mission.json`, `<out>/worldmap.npy` (all atomic) and `<out>/mission.png` (worldmap vs truth,
 trajectory, samples, start).  Mapped/fidelity/located use
@@ -16,13 +21,10 @@ home, time and stuck figures come from the twin's ground truth.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
-import os
-import tempfile
+import statistics
 import time
-from collections import deque
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -31,106 +33,15 @@ import numpy as np
 from dashboard import add_dashboard_options
 from drive_rover import add_home_by_option
 from sim.cli import add_shadows_option, parse_with_logging
+from sim.mission_parts import (HOME_RADIUS_M, StuckMeter, TruthTrack, nan_to_none, open_recorder,  # noqa: F401
+                               progress_bar, write_json_atomic, write_npy_atomic, write_png_atomic)
+from sim.timing import Timing, VirtualClock, add_timing_options, frame_after, frame_time, timing_from_args
 
 log = logging.getLogger(__name__)
 
 TIME_LIMIT_S = 900.0  # simulated seconds before a mission is stopped
-HOME_RADIUS_M = 3.0  # "returned home": within this of the start after collecting all
-STUCK_SPEED = 0.2  # m/s, below this while commanding throttle counts as stuck
-STUCK_THROTTLE = 0.05  # |throttle| above this is "commanding throttle"
-PROGRESS_WINDOW_S = 10.0  # s, no-progress window
-PROGRESS_MIN_M = 0.5  # m, moving less than this over the window (not picking up) = stuck
-STUCK_REPORT_MIN_S = 5.0  # s, stuck stretches at least this long are listed (time, place) in the JSON
 MAP_PNG_SCALE = 4  # px per metre in the mission PNG
 DEFAULT_OUT_ROOT = "out"  # default output folder root
-
-
-# ----------------------------------------------------------------------------- helpers
-def write_json_atomic(path, obj) -> None:
-    """Write JSON via a temp file + os.replace (never a half-written file)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=1, default=_json_default)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
-
-
-def write_png_atomic(path, bgr) -> None:
-    import cv2
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ok, buf = cv2.imencode(".png", bgr)
-    if not ok:
-        raise ValueError(f"cannot encode PNG for {path}")
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_bytes(buf.tobytes())
-    os.replace(tmp, path)
-
-
-def write_npy_atomic(path, array) -> None:
-    """Save an array for later analysis (`np.load`), via a temp file + os.replace."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as fh:
-        np.save(fh, np.asarray(array))
-    os.replace(tmp, path)
-
-
-def _nan_to_none(v):
-    return None if isinstance(v, float) and not math.isfinite(v) else v
-
-
-class StuckMeter:
-    """Truth-based stuck time: slow while commanding throttle, or no progress over a window."""
-
-    def __init__(self):
-        self.total_s = 0.0
-        self.longest_s = 0.0
-        self.stretches = []  # [t_start, x, y, duration_s] of stretches >= STUCK_REPORT_MIN_S
-        self._run_s = 0.0
-        self._run_start = None
-        self._hist = deque()  # (t, x, y, picking)
-
-    def update(self, t, dt, x, y, v, throttle, picking):
-        self._hist.append((t, x, y, picking))
-        while self._hist and self._hist[0][0] < t - PROGRESS_WINDOW_S:
-            self._hist.popleft()
-        slow = abs(throttle) > STUCK_THROTTLE and abs(v) < STUCK_SPEED
-        no_progress = False
-        if t >= PROGRESS_WINDOW_S and not any(h[3] for h in self._hist):
-            x0, y0 = self._hist[0][1], self._hist[0][2]
-            no_progress = math.hypot(x - x0, y - y0) < PROGRESS_MIN_M
-        if (slow or no_progress) and not picking:
-            if self._run_s == 0.0:
-                self._run_start = (round(t - dt, 2), round(x, 2), round(y, 2))
-            self.total_s += dt
-            self._run_s += dt
-            self.longest_s = max(self.longest_s, self._run_s)
-        else:
-            self.close_run()
-
-    def close_run(self):
-        """End the current stuck stretch (also call at the end of a mission)."""
-        if self._run_s >= STUCK_REPORT_MIN_S and self._run_start is not None:
-            self.stretches.append([*self._run_start, round(self._run_s, 2)])
-        self._run_s = 0.0
-        self._run_start = None
 
 
 @dataclass
@@ -159,9 +70,16 @@ class MissionResult:
     files: dict = field(default_factory=dict)
     shadows: bool = False  # the twin rendered terrain cast shadows (--shadows on)
     home_by_s: float | None = None  # the client's return deadline when set (--home-by), s
+    timing: str = "unity"  # the loop: unity (the real simulator's) or lockstep (easier)
+    fps: float | None = None  # render frames/s (unity timing)
+    latency_ms: float | None = None  # transport round trip modelled in-process / asked for on the wire, ms
+    compute_ms: float | None = None  # client compute time modelled in-process, ms
+    telemetry_hz: float | None = None  # telemetry messages per simulated second
+    reply_delay_ms: float | None = None  # median capture -> command applied, ms of simulated time
+    round_trip_ms: float | None = None  # wire, unity timing: median capture -> command received, wall ms
 
     def as_dict(self):
-        return {k: _nan_to_none(v) for k, v in asdict(self).items()}
+        return {k: nan_to_none(v) for k, v in asdict(self).items()}
 
 
 # ----------------------------------------------------------------------------- the PNG
@@ -202,12 +120,6 @@ def mission_image(world, worldmap, trajectory, initial_samples, collected_xy, st
 
 
 # ----------------------------------------------------------------------------- in-process
-def _progress(total, enabled, desc):
-    from tqdm import tqdm
-
-    return tqdm(total=round(total), unit="sim s", disable=not enabled, desc=desc, leave=False)
-
-
 def _video_writer(path, fps):
     import cv2
 
@@ -228,50 +140,65 @@ def _video_frame(rgb, worldmap):
     return np.ascontiguousarray(np.hstack([cam, mp]))
 
 
+def telemetry_period_s(timing: Timing) -> float:
+    """Simulated seconds between telemetries with a client that answers each in reply_delay_s."""
+    if not timing.unity:
+        from sim.timing import LOCKSTEP_FRAME_S
+
+        return LOCKSTEP_FRAME_S
+    return frame_time(frame_after(timing.reply_delay_s, timing.fps), timing.fps)
+
+
 def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None, progress=True,
-                  render=True, client_factory=None, home_by=None, watchers=()):
-    """Drive `AutonomyClient` against `RoverTwin` in this process; returns (result dict, worldmap, traj).
+                  render=True, client_factory=None, home_by=None, watchers=(), timing: Timing | None = None):
+    """Drive `AutonomyClient` against `RoverTwin` in this process; returns the summary dict.
 
+    timing: the loop (default Timing(): the real simulator's, on a virtual clock).
+    client_factory(clock) builds the client; `clock` is what it must read as its wall clock.
     watchers: objects with ``observe(client, event, force=False)`` called after every reply
-    (the dashboard and the viewer's timeline), and once more with force=True at the end."""
-    from sim.twin import CommandError, RoverTwin
+    (the dashboard and the viewer's timeline), and once more with force=True at the end.
+    """
+    from sim.twin import RoverTwin
 
+    timing = timing or Timing()
     if client_factory is None:
         from autonomy import AutonomyClient
 
-        def client_factory():
-            return AutonomyClient(ground_truth=world.nav_truth, insets=False, home_by_s=home_by)
-    twin = RoverTwin(world, seed=seed, render=render)
-    client = client_factory()
+        def client_factory(clock):
+            return AutonomyClient(ground_truth=world.nav_truth, insets=False, home_by_s=home_by, clock=clock)
+    twin = RoverTwin(world, seed=seed, render=render, sim_time_field=timing.sends_sim_time)
+    clock = VirtualClock()
+    client = client_factory(clock)
     tel = twin.reset(seed)
-    recorder = _recorder(record)
-    writer = _video_writer(video, 1.0 / twin.frame_dt) if video else None
-    stuck = StuckMeter()
-    traj = [(twin.truth.x, twin.truth.y)]
-    end_reason, completed, distance = "time limit", False, 0.0
-    bar = _progress(time_limit, progress, f"seed {seed}")
+    recorder = open_recorder(record)
+    writer = _video_writer(video, 1.0 / telemetry_period_s(timing)) if video else None
+    track = TruthTrack(twin)
+    delays = []
+    end_reason, completed = "time limit", False
+    bar = progress_bar(time_limit, progress, f"seed {seed}")
+    step = _unity_step if timing.unity else _lockstep_step
+    captured_at = 0.0  # time of the render frame that captured `tel`, s
     t_wall = time.perf_counter()
     try:
         while twin.sim_time < time_limit:
             if recorder is not None:
                 recorder.write_twin(twin)
+            # the client reads its clock when the telemetry reaches it (half the round trip)
+            clock.t = captured_at + timing.latency_ms / 2e3 if timing.unity else captured_at
             event, payload = client.handle_telemetry(tel)
             for watcher in watchers:
                 watcher.observe(client, event)
-            try:
-                tel = twin.step(event, payload)
-            except CommandError as exc:  # the real simulator would stall here
-                end_reason = f"stalled: {exc}"
-                log.warning("client sent a command the simulator cannot parse: %s", exc)
+            tel, dt, stall, acted_at = step(twin, timing, event, payload, captured_at)
+            if stall:
+                end_reason = f"stalled: {stall}"
+                log.warning("client sent a command the simulator cannot parse: %s", stall)
                 break
-            tr = twin.truth
-            distance += math.hypot(tr.x - traj[-1][0], tr.y - traj[-1][1])
-            traj.append((tr.x, tr.y))
-            stuck.update(tr.sim_time, twin.frame_dt, tr.x, tr.y, tr.v, twin.controls.throttle,
-                         tr.picking_up)
+            delays.append(acted_at - captured_at)
+            captured_at = acted_at
+            track.update(twin, dt)
             if writer is not None:
                 writer.write(_video_frame(twin.last_rgb, client.rover.worldmap))
-            bar.update(twin.frame_dt)
+            bar.update(dt)
             if getattr(client.rover, "mission_complete", False):
                 end_reason, completed = "mission complete", True
                 break
@@ -284,19 +211,36 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
         if recorder is not None:
             recorder.close()
     wall = time.perf_counter() - t_wall
-    summary = dict(twin=twin, stuck=stuck, traj=traj, distance=distance, wall=wall,
-                   end_reason=end_reason, completed=completed,
-                   worldmap=np.array(client.rover.worldmap, copy=True),
-                   rejected=twin.rejected_commands)
-    return summary
+    return dict(twin=twin, stuck=track.stuck, traj=track.traj, distance=track.distance, wall=wall,
+                end_reason=end_reason, completed=completed,
+                worldmap=np.array(client.rover.worldmap, copy=True),
+                rejected=twin.rejected_commands, timing=timing,
+                reply_delay_ms=round(1e3 * statistics.median(delays), 1) if delays else None)
 
 
-def _recorder(folder):
-    if not folder:
-        return None
-    from sim.record import TwinRecorder
+def _lockstep_step(twin, timing, event, payload, captured_at):
+    """The twin's old loop: the command acts at once and time advances one frame."""
+    from sim.twin import CommandError
 
-    return TwinRecorder(folder)
+    try:
+        tel = twin.step(event, payload)
+    except CommandError as exc:  # the real simulator would stall here
+        return None, 0.0, str(exc), captured_at
+    return tel, twin.frame_dt, None, captured_at + twin.frame_dt
+
+
+def _unity_step(twin, timing, event, payload, captured_at):
+    """The real loop: physics runs on while the reply travels; it acts at the next render frame."""
+    from sim.twin import CommandError
+
+    arrives = captured_at + timing.reply_delay_s
+    act_at = frame_time(frame_after(arrives, timing.fps), timing.fps)
+    dt = twin.advance_to(act_at)
+    try:
+        twin.apply(event, payload)
+    except CommandError as exc:  # no telemetry reply: the chain stalls for good
+        return None, dt, str(exc), act_at
+    return twin.capture(), dt, None, act_at
 
 
 # ----------------------------------------------------------------------------- scoring
@@ -315,6 +259,8 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
     home = math.hypot(tr.x - tr.start_xy[0], tr.y - tr.start_xy[1])
     all_collected = len(tr.collected) == len(tr.initial_samples) and len(tr.initial_samples) > 0
     wall = summary["wall"]
+    timing = summary.get("timing") or Timing()
+    period = tr.sim_time / tr.frame if tr.frame else None
     return MissionResult(
         seed=seed, world=world.name, mode=mode, mapped_pct=mapped, fidelity_pct=fidelity,
         located=located, collected=len(tr.collected), samples=len(tr.initial_samples),
@@ -325,18 +271,22 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
         final_distance_to_start_m=round(home, 2), wall_s=round(wall, 2),
         frames_per_s=round(tr.frame / wall, 1) if wall > 0 else float("nan"),
         rejected_commands=summary["rejected"], stuck_stretches=list(summary["stuck"].stretches),
-        shadows=bool(world.cast_shadows))
+        shadows=bool(world.cast_shadows), **timing.describe(),
+        telemetry_hz=round(1.0 / period, 2) if period else None,
+        reply_delay_ms=summary.get("reply_delay_ms"), round_trip_ms=summary.get("round_trip_ms"))
 
 
 def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,
                 wire=False, progress=True, render=True, write_files=True, home_by=None, dashboard=None,
-                dashboard_port=None) -> dict:
+                dashboard_port=None, timing: Timing | None = None) -> dict:
     """Run, score and (optionally) write mission.json + mission.png; returns the result dict.
 
     home_by: the client's return deadline, s (None: its default, decision.HOME_BY_S).
     dashboard: a live dashboard (in-process missions) fed every frame; dashboard_port: with
     ``wire``, drive_rover.py serves the dashboard itself on this port.
+    timing: the simulator loop (default Timing(): the real simulator's at 30 fps).
     """
+    timing = timing or Timing()
     from sim.world import World, load_world
 
     world_obj = world if isinstance(world, World) else load_world(world)
@@ -345,7 +295,8 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
 
         client_args = ["--dashboard", "--dashboard-port", str(dashboard_port)] if dashboard_port else []
         summary = run_wire_mission(world_obj, seed, time_limit=time_limit, record=record,
-                                   progress=progress, render=render, home_by=home_by, client_args=client_args)
+                                   progress=progress, render=render, home_by=home_by, client_args=client_args,
+                                   timing=timing)
         mode = "wire"
     else:
         from dashboard.timeline import Timeline
@@ -353,7 +304,8 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
         timeline = Timeline() if write_files else None
         watchers = [w for w in (timeline, dashboard) if w is not None]
         summary = run_inprocess(world_obj, seed, time_limit=time_limit, video=video, record=record,
-                                progress=progress, render=render, home_by=home_by, watchers=watchers)
+                                progress=progress, render=render, home_by=home_by, watchers=watchers,
+                                timing=timing)
         summary["timeline"] = timeline
         mode = "inprocess"
     return finish_mission(world_obj, seed, mode, summary, time_limit, out=out, write_files=write_files,
@@ -396,11 +348,22 @@ def format_result(r: dict) -> str:
         return "n/a" if v is None else fmt.format(v)
 
     shadows = ", shadows on" if r.get("shadows", False) else ""
-    return (f"seed {r['seed']} [{r['world']}, {r['mode']}{shadows}]: mapped {f(r['mapped_pct'])}, "
+    return (f"seed {r['seed']} [{r['world']}, {r['mode']}{shadows}, {timing_label(r)}]: mapped {f(r['mapped_pct'])}, "
             f"fidelity {f(r['fidelity_pct'])}, located {f(r['located'], '{}')}/{r['samples']}, "
             f"collected {r['collected']}/{r['samples']}, home {'yes' if r['returned_home'] else 'no'}, "
             f"time {r['time_s']:.0f} s ({r['end_reason']}), stuck {r['stuck_time_s']:.0f} s "
-            f"(longest {r['longest_stuck_s']:.0f} s), {r['frames']} frames at {f(r['frames_per_s'], '{:.1f}')} fps")
+            f"(longest {r['longest_stuck_s']:.0f} s), {r['frames']} telemetry frames "
+            f"({f(r.get('telemetry_hz'), '{:.1f}')} per sim s, {f(r['frames_per_s'], '{:.1f}')} per wall s)")
+
+
+def timing_label(r: dict) -> str:
+    """'unity 30 fps, 4 ms latency' or 'lockstep (easier)' from a result or evaluation meta dict."""
+    if r.get("timing", "unity") == "lockstep":
+        return "lockstep (easier than the real simulator)"
+    default = Timing()  # a result that names no parameters ran the defaults
+    fps = r.get("fps") if r.get("fps") is not None else default.fps
+    latency = r.get("latency_ms") if r.get("latency_ms") is not None else default.latency_ms
+    return f"unity {fps:g} fps, {latency:g} ms latency"
 
 
 def main(argv=None) -> int:
@@ -415,10 +378,16 @@ def main(argv=None) -> int:
     add_home_by_option(p)
     add_shadows_option(p)
     add_dashboard_options(p)
+    add_timing_options(p)
     p.add_argument("--no-progress", action="store_true")
     a = parse_with_logging(p, argv)
     if a.time_limit <= 0 or not math.isfinite(a.time_limit):
         p.error("--time-limit must be a positive number of seconds")
+    try:
+        timing = timing_from_args(a)
+    except ValueError as exc:
+        p.error(str(exc))
+    log.info("timing: %s", timing.label())
     dash = None
     if a.dashboard and not a.wire:
         from dashboard import LiveDashboard
@@ -441,7 +410,7 @@ def main(argv=None) -> int:
 
         world = with_shadows(load_world(a.world), a.shadows == "on")
         r = run_mission(a.seed, world, a.time_limit, a.out, a.video, a.record, a.wire,
-                        progress=not a.no_progress, home_by=a.home_by, dashboard=dash,
+                        progress=not a.no_progress, home_by=a.home_by, dashboard=dash, timing=timing,
                         dashboard_port=a.dashboard_port if a.dashboard and a.wire else None)
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)

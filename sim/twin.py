@@ -1,15 +1,17 @@
 """`RoverTwin`: the simulator in one object, with a Gymnasium-like reset/step.
 
-`reset(seed)` and `step(event, payload)` return exactly the telemetry dict the
-Unity simulator would send (every value a string, .NET N4 formatting, raw 0-360
-pitch/roll, ...) plus one twin-only field, `sim_time` (seconds of simulated time
-as a string), which the client uses as its clock so missions run faster than
-real time and stay deterministic.
+`reset(seed)` and `telemetry()` return exactly the telemetry dict the Unity
+simulator would send (every value a string, .NET N4 formatting, raw 0-360
+pitch/roll, ...).  Only when built with ``sim_time_field=True`` (the lockstep
+debugging loop) does it add the twin-only `sim_time` (simulated seconds as a
+string); the real simulator sends no clock.
 
-Timing: the real simulator renders ~30 fps over a 0.02 s physics step and answers
-each command with one telemetry message.  The twin advances one *frame* per
-command; a frame is PHYSICS_STEPS_PER_FRAME physics steps (default 2 -> 0.04 s,
-25 Hz telemetry, the simulator's own recording rate).
+Two ways to move time (sim/timing.py says which loop uses which):
+* the real simulator's loop: `advance_to(t)` runs the free-running 0.02 s physics
+  up to time t, `apply(...)` sets the inputs at a render frame and `capture()`
+  takes that frame's telemetry;
+* lockstep: `step(event, payload)` applies a command, advances one frame of
+  PHYSICS_STEPS_PER_FRAME physics steps (0.04 s) and returns the telemetry.
 
 Commands are parsed as the real CommandServer does (values must be JSON strings;
 `float.Parse` on anything else throws and the real simulator sends no reply).
@@ -115,7 +117,7 @@ class TwinTruth:
     roll: float
     v: float
     sim_time: float
-    frame: int
+    frame: int  # telemetry frames produced since reset
     samples: list  # remaining Sample objects
     collected: list  # collected Sample objects
     initial_samples: list
@@ -129,7 +131,8 @@ class RoverTwin:
     """Headless simulator: physics, samples, rendering and telemetry for one rover."""
 
     def __init__(self, world=None, seed: int = 0, steps_per_frame: int = PHYSICS_STEPS_PER_FRAME,
-                 render: bool = True, renderer=None, jpeg_quality: int = JPEG_QUALITY):
+                 render: bool = True, renderer=None, jpeg_quality: int = JPEG_QUALITY,
+                 sim_time_field: bool = False):
         if world is None:
             from sim.world import default_world
 
@@ -140,6 +143,7 @@ class RoverTwin:
         self.render_enabled = bool(render)
         self._renderer = renderer
         self.jpeg_quality = int(jpeg_quality)
+        self.sim_time_field = bool(sim_time_field)  # add the twin-only clock (lockstep debugging only)
         self._blank_jpeg_b64 = None
         self.last_rgb = None  # last rendered camera frame (RGB) or None
         self.last_jpeg = None  # its JPEG bytes
@@ -158,7 +162,7 @@ class RoverTwin:
         self.physics = RoverPhysics(self.world, *self.world.start_xy, yaw)
         self.controls = Controls()
         self.arm = PickupArm()
-        self.sim_time = 0.0
+        self.physics_steps = 0
         self.frame = 0
         self.rejected_commands = 0
         return self.telemetry()
@@ -196,12 +200,34 @@ class RoverTwin:
                 log.debug("fixed_turn ignored: rover moving or inputs nonzero")
 
     def advance_frame(self):
-        """One frame of game time: physics steps, pickup arm, clock."""
-        for _ in range(self.steps_per_frame):
+        """One lockstep frame of game time: physics steps, pickup arm, clock."""
+        self.advance_steps(self.steps_per_frame)
+        self.frame += 1
+
+    def advance_steps(self, n: int) -> None:
+        """Run n physics steps on the current (sticky) inputs, the pickup arm alongside."""
+        for _ in range(max(0, int(n))):
             self.physics.step(self.controls, frozen=self.arm.freezes_rover)
             self.arm.advance(PHYSICS_DT, self.samples)
-        self.sim_time += self.frame_dt
+        self.physics_steps += max(0, int(n))
+
+    def advance_to(self, t: float) -> float:
+        """Free-running physics up to time t (Unity's FixedUpdate catch-up); returns seconds advanced."""
+        from sim.timing import physics_steps_at
+
+        n = physics_steps_at(t) - self.physics_steps
+        self.advance_steps(n)
+        return max(0, n) * PHYSICS_DT
+
+    def capture(self) -> dict:
+        """One telemetry captured at this render frame (the real loop's reply to a command)."""
         self.frame += 1
+        return self.telemetry()
+
+    @property
+    def sim_time(self) -> float:
+        """Simulated seconds since reset (whole physics steps, no float drift)."""
+        return self.physics_steps * PHYSICS_DT
 
     def _near(self):
         s = self.physics.state
@@ -257,8 +283,9 @@ class RoverTwin:
             "samples_x": ";".join(format_n(smp.x, 2) for smp in self.samples),
             "samples_y": ";".join(format_n(smp.y, 2) for smp in self.samples),
             "image": self._image_b64(),
-            "sim_time": f"{self.sim_time:.{SIM_TIME_DECIMALS}f}",
         }
+        if self.sim_time_field:
+            out["sim_time"] = f"{self.sim_time:.{SIM_TIME_DECIMALS}f}"
         self.arm.end_of_frame()
         return out
 

@@ -1,7 +1,8 @@
 """Headless simulator process that talks to a client exactly like the Unity program.
 
     python -m sim.wire [--host 127.0.0.1] [--port 4567] [--seed N] [--world SPEC]
-                       [--mode lockstep|realtime] [--fps 25] [--time-limit S] [--record DIR]
+                       [--mode realtime|lockstep] [--fps 30] [--extra-latency-ms MS]
+                       [--time-limit S] [--record DIR]
 
 Like the real simulator it is the websocket *client*: it opens
 ``ws://HOST:PORT/socket.io/?EIO=4&transport=websocket`` directly (no polling, no
@@ -11,11 +12,15 @@ when the socket opens and then exactly one telemetry per handled command
 (``data``, ``manual``, ``pickup``, ``fixed_turn``), and says ``41`` + ``1`` on quit.
 
 Modes:
-* ``lockstep`` (default): every command advances the twin one frame (0.04 s) and
-  the reply carries the new state - runs as fast as the client answers.
-* ``realtime``: the twin advances at ``--fps`` frames per wall-clock second
-  whatever the client does; a command is applied at once and answered with the
-  current state, as in Unity.
+* ``realtime`` (default, the real simulator's loop, sim/timing.py "unity"): physics
+  free-runs on the wall clock; the screen renders at ``--fps``; a command waits in a
+  queue until the first render frame after it arrives (plus ``--extra-latency-ms``
+  if asked), where it sets the inputs and one telemetry is captured at that frame
+  and sent.  With the single reply chain a client keeps, that is at most one
+  telemetry per render frame.  No ``sim_time`` is sent.
+* ``lockstep`` (EASIER than the real simulator, for debugging): every command
+  advances the twin one frame (0.04 s) and the reply carries the new state and the
+  twin-only ``sim_time`` clock - runs as fast as the client answers.
 
 A command the real simulator cannot parse (JSON numbers, garbage, NaN, missing
 fields, unknown events) gets *no reply*, as in the real one (its float.Parse
@@ -36,15 +41,19 @@ import time
 from pathlib import Path
 
 from sim.cli import parse_with_logging
+from sim.mission_parts import TruthTrack, all_collected_and_home, open_recorder, progress_bar
+from sim.timing import UNITY_FPS, WIRE_LATENCY_MS, Timing
 
 log = logging.getLogger(__name__)
 
 URL_TEMPLATE = "ws://{host}:{port}/socket.io/?EIO=4&transport=websocket"  # the simulator's URL
 PING_INTERVAL_S = 25.0  # s between the client's "2" pings (Engine.IO v3 rule)
 RECONNECT_DELAY_S = 0.005  # s between reconnect attempts (the simulator's 5 ms)
-RECV_POLL_S = 0.05  # s, receive timeout so pings and real-time frames keep flowing
+RECV_POLL_S = 0.05  # s, longest receive wait so pings keep flowing
+MIN_RECV_WAIT_S = 0.0005  # s, shortest receive wait before a due render frame
 OPEN_TELEMETRY_COUNT = 1  # telemetry messages sent unprompted when the socket opens
-DEFAULT_FPS = 25.0  # frames per second in real-time mode
+DEFAULT_FPS = UNITY_FPS  # render frames per second in real-time mode
+MODES = ("realtime", "lockstep")  # sim.timing models "unity" and "lockstep" on the wire
 STALL_TIMEOUT_S = 30.0  # wall s without a command before a wire mission gives up
 SERVER_START_TIMEOUT_S = 60.0  # wall s to wait for drive_rover.py to accept connections
 CLIENT_MAP_OPTION = "--save-map"  # drive_rover.py option (if it has one) to dump rover.worldmap as .npy
@@ -71,27 +80,39 @@ def decode_event(frame: str):
 
 
 class WireSimulator:
-    """One simulated rover on the wire. `run()` blocks until `stop()` or `should_stop()`."""
+    """One simulated rover on the wire. `run()` blocks until `stop()` or `should_stop()`.
 
-    def __init__(self, twin, host="127.0.0.1", port=4567, mode="lockstep", fps=DEFAULT_FPS,
-                 recorder=None, on_frame=None, should_stop=None, open_telemetry=OPEN_TELEMETRY_COUNT):
-        if mode not in ("lockstep", "realtime"):
-            raise ValueError(f"mode must be lockstep or realtime, not {mode!r}")
+    on_frame(twin, dt) is called after every advance of the twin (dt simulated seconds).
+    """
+
+    def __init__(self, twin, host="127.0.0.1", port=4567, mode="realtime", fps=DEFAULT_FPS,
+                 recorder=None, on_frame=None, should_stop=None, open_telemetry=OPEN_TELEMETRY_COUNT,
+                 extra_latency_s=0.0, clock=time.monotonic):
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, not {mode!r}")
         self.twin = twin
         self.url = URL_TEMPLATE.format(host=host, port=int(port))
         self.mode = mode
         self.fps = float(fps) if fps and fps > 0 else DEFAULT_FPS
+        self.extra_latency_s = max(0.0, float(extra_latency_s))  # held back before a command is seen
         self.recorder = recorder
-        self.on_frame = on_frame  # callback(twin) after every advanced frame
+        self.on_frame = on_frame
         self.should_stop = should_stop or (lambda: False)
         self.open_telemetry = max(0, int(open_telemetry))
+        self.clock = clock
         self._stop = threading.Event()
         self.ws = None
         self.connections = 0
         self.commands = 0
         self.rejected = 0
         self.replies = 0
-        self.last_command_wall = time.monotonic()
+        self.render_frames = 0  # real-time render frames run
+        self.last_command_wall = clock()
+        self._t0 = None  # wall time of the scene's t = 0 (first connection), real-time mode
+        self._pending = []  # (due wall time, event, payload) commands waiting for a render frame
+        self._last_capture = None  # (frame time, wall time the telemetry left) of the last capture
+        self.reply_delays_s = []  # frame time a command acted at - frame time of the capture before it
+        self.round_trips_s = []  # wall: render frame of a capture -> the next command received
 
     def stop(self):
         self._stop.set()
@@ -126,33 +147,67 @@ class WireSimulator:
         self.replies += 1
 
     # ---------------------------------------------------------------- frames
-    def _frame_done(self):
+    def _frame_done(self, dt):
         if self.recorder is not None:
             self.recorder.write_twin(self.twin)
         if self.on_frame is not None:
-            self.on_frame(self.twin)
+            self.on_frame(self.twin, dt)
 
     def _handle_event(self, event, payload):
+        """A decoded command: lockstep answers at once; real time queues it for the next frame."""
+        self.commands += 1
+        now = self.clock()
+        self.last_command_wall = now
+        if self.mode == "realtime":
+            if self._last_capture is not None:
+                self.round_trips_s.append(now - self._last_capture[1])
+            self._pending.append((now + self.extra_latency_s, event, payload))
+            return
+        tel = self._apply(event, payload, advance=True)
+        if tel is not None:
+            self._send_telemetry(tel)
+
+    def _apply(self, event, payload, advance):
+        """Apply one command to the twin; the lockstep telemetry, True (real time) or None if rejected."""
         from sim.twin import CommandError
 
-        self.commands += 1
-        self.last_command_wall = time.monotonic()
         try:
-            if self.mode == "lockstep":
+            if advance:
                 tel = self.twin.step(event, payload)
-                self._frame_done()
-            else:
-                self.twin.apply(event, payload)
-                tel = self.twin.telemetry()
+                self._frame_done(self.twin.frame_dt)
+                return tel
+            self.twin.apply(event, payload)
+            return True
         except CommandError as exc:
             self.rejected += 1
             log.warning("no telemetry reply (the real simulator would stall): %s", exc)
-            return
         except Exception:  # a twin bug must not kill the simulator: Unity logs and carries on
             self.rejected += 1
             log.exception("error handling %r; no telemetry reply", event)
-            return
-        self._send_telemetry(tel)
+        return None
+
+    def render_frame(self, now=None):
+        """One real-time render frame: physics catches up to the wall clock, due commands set
+        the inputs, and one telemetry captured now answers each of them."""
+        now = self.clock() if now is None else now
+        if self._t0 is None:
+            self._t0 = now
+        frame_t = now - self._t0
+        dt = self.twin.advance_to(frame_t)
+        self.render_frames += 1
+        due = [c for c in self._pending if c[0] <= now]
+        self._pending = [c for c in self._pending if c[0] > now]
+        answered = sum(1 for _, event, payload in due if self._apply(event, payload, advance=False))
+        if answered:
+            if self._last_capture is not None:
+                self.reply_delays_s.append(frame_t - self._last_capture[0])
+            tel = self.twin.capture()
+            self._frame_done(dt)
+            for _ in range(answered):  # Unity queues one telemetry per handled command
+                self._send_telemetry(tel)
+            self._last_capture = (frame_t, now)
+        elif self.on_frame is not None:
+            self.on_frame(self.twin, dt)
 
     def _handle_frame(self, frame):
         if not isinstance(frame, str) or not frame:
@@ -175,28 +230,40 @@ class WireSimulator:
         # "3" (pong), "40" (namespace connect, ignored by the sim), others: nothing to do
 
     # ---------------------------------------------------------------- main loop
+    def _open(self):
+        """The socket just opened: the simulator sends its current telemetry unprompted."""
+        if self.mode == "realtime" and self._t0 is None:
+            self._t0 = self.clock()
+        for _ in range(self.open_telemetry):
+            self._send_telemetry(self.twin.telemetry())
+        if self.mode == "realtime":
+            self._last_capture = (self.twin.sim_time, self.clock())
+
     def run(self):
         import websocket
 
+        period = 1.0 / self.fps
         while not self._stopping():
             self.ws = self._connect()
             if self.ws is None:
                 break
-            next_ping = time.monotonic() + PING_INTERVAL_S
-            next_frame = time.monotonic() + 1.0 / self.fps
+            next_ping = self.clock() + PING_INTERVAL_S
+            next_frame = self.clock() + period
             try:
-                for _ in range(self.open_telemetry):
-                    self._send_telemetry(self.twin.telemetry())
+                self._open()
                 while not self._stopping():
-                    now = time.monotonic()
+                    now = self.clock()
                     if now >= next_ping:
                         self._send("2")
                         next_ping = now + PING_INTERVAL_S
+                    wait = RECV_POLL_S
                     if self.mode == "realtime":
-                        while now >= next_frame:
-                            self.twin.advance_frame()
-                            self._frame_done()
-                            next_frame += 1.0 / self.fps
+                        if now >= next_frame:
+                            self.render_frame(now)
+                            # a frame that overran drops the missed ones, as a slow machine's frame rate falls
+                            next_frame = max(next_frame + period, self.clock())
+                        wait = min(RECV_POLL_S, max(MIN_RECV_WAIT_S, next_frame - self.clock()))
+                    self.ws.settimeout(wait)
                     try:
                         frame = self.ws.recv()
                     except websocket.WebSocketTimeoutException:
@@ -212,8 +279,8 @@ class WireSimulator:
                     self.ws.close()
                 except Exception:  # the peer may already be gone
                     pass
-        log.info("wire simulator stopped: %d commands, %d rejected, %d replies",
-                 self.commands, self.rejected, self.replies)
+        log.info("wire simulator stopped: %d commands, %d rejected, %d replies, %d render frames",
+                 self.commands, self.rejected, self.replies, self.render_frames)
 
 
 # ------------------------------------------------------------------------ wire missions
@@ -286,18 +353,27 @@ def _load_client_map(path):
 
 
 def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, render=True,
-                     server_log=None, home_by=None, client_args=()):
-    """Twin over the real protocol against drive_rover.py in a subprocess (lockstep).
+                     server_log=None, home_by=None, timing: Timing | None = None,
+                     client_args=()):
+    """Twin over the real protocol against drive_rover.py in a subprocess.
 
+    timing: unity (default) runs the real simulator's loop in real time at timing.fps, holding
+    each command back by latency_ms minus the transport's own WIRE_LATENCY_MS (the wire has its
+    real latency; compute_ms does not apply: the client's compute is real too); lockstep runs the
+    old easier loop with the twin's sim_time.
     The client's worldmap lives in the other process: it is scored only when
     drive_rover.py can dump it (CLIENT_MAP_OPTION); otherwise mapped/fidelity/located
     are None and only the truth-based figures are available.
     """
+    import shutil
+    import statistics
     import tempfile
-    from sim.mission import HOME_RADIUS_M, StuckMeter, _progress, _recorder
+
     from sim.twin import RoverTwin
 
-    twin = RoverTwin(world, seed=seed, render=render)
+    timing = timing or Timing()
+    mode = "realtime" if timing.unity else "lockstep"
+    twin = RoverTwin(world, seed=seed, render=render, sim_time_field=timing.sends_sim_time)
     port = free_port()
     map_dir = tempfile.mkdtemp(prefix="twin-wire-map-")
     map_path = os.path.join(map_dir, "worldmap.npy")
@@ -306,22 +382,16 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
         extra += ["--home-by", repr(float(home_by))]
     extra += list(client_args)  # e.g. --dashboard
     proc = start_client_server(port, server_log, extra)
-    state = {"end": "time limit", "completed": False, "still_home_s": 0.0, "distance": 0.0}
-    stuck = StuckMeter()
-    traj = [(twin.truth.x, twin.truth.y)]
-    bar = _progress(time_limit, progress, f"seed {seed} (wire)")
-    recorder = _recorder(record)
+    state = {"end": "time limit", "completed": False, "still_home_s": 0.0}
+    track = TruthTrack(twin)
+    bar = progress_bar(time_limit, progress, f"seed {seed} (wire, {mode})")
+    recorder = open_recorder(record)
 
-    def on_frame(tw):
-        tr = tw.truth
-        state["distance"] += math.hypot(tr.x - traj[-1][0], tr.y - traj[-1][1])
-        traj.append((tr.x, tr.y))
-        stuck.update(tr.sim_time, tw.frame_dt, tr.x, tr.y, tr.v, tw.controls.throttle, tr.picking_up)
-        bar.update(tw.frame_dt)
-        done = (tr.initial_samples and len(tr.collected) == len(tr.initial_samples)
-                and math.hypot(tr.x - tr.start_xy[0], tr.y - tr.start_xy[1]) <= HOME_RADIUS_M
-                and abs(tr.v) < 0.01)
-        state["still_home_s"] = state["still_home_s"] + tw.frame_dt if done else 0.0
+    def on_frame(tw, dt):
+        track.update(tw, dt)
+        bar.update(dt)
+        done = all_collected_and_home(tw.truth) and abs(tw.truth.v) < 0.01
+        state["still_home_s"] = state["still_home_s"] + dt if done else 0.0
 
     def should_stop():
         if twin.sim_time >= time_limit:
@@ -337,8 +407,9 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
             return True
         return False
 
-    sim = WireSimulator(twin, port=port, mode="lockstep", recorder=recorder, on_frame=on_frame,
-                        should_stop=should_stop)
+    extra_latency_s = max(0.0, timing.latency_ms - WIRE_LATENCY_MS) / 1e3 if timing.unity else 0.0
+    sim = WireSimulator(twin, port=port, mode=mode, fps=timing.fps, recorder=recorder, on_frame=on_frame,
+                        should_stop=should_stop, extra_latency_s=extra_latency_s)
     t0 = time.perf_counter()
     try:
         if not wait_for_port(port, proc):
@@ -351,14 +422,23 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
         if recorder is not None:
             recorder.close()
     worldmap = _load_client_map(map_path) if CLIENT_MAP_OPTION in extra else None
-    import shutil
-
     shutil.rmtree(map_dir, ignore_errors=True)  # our own temp folder
     if CLIENT_MAP_OPTION in extra and worldmap is None:
         log.warning("drive_rover.py did not leave a readable worldmap at %s", map_path)
-    return dict(twin=twin, stuck=stuck, traj=traj, distance=state["distance"],
+
+    def median_ms(values):
+        return round(1e3 * statistics.median(values), 1) if values else None
+
+    if timing.unity:
+        log.info("wire: %d render frames, %d telemetries; capture -> command received %s ms median, "
+                 "capture -> command acted %s ms median", sim.render_frames, sim.replies,
+                 median_ms(sim.round_trips_s), median_ms(sim.reply_delays_s))
+    return dict(twin=twin, stuck=track.stuck, traj=track.traj, distance=track.distance,
                 wall=time.perf_counter() - t0, end_reason=state["end"], completed=state["completed"],
-                worldmap=worldmap, rejected=sim.rejected)
+                worldmap=worldmap, rejected=sim.rejected, timing=timing,
+                reply_delay_ms=median_ms(sim.reply_delays_s) if timing.unity else None,
+                round_trip_ms=median_ms(sim.round_trips_s) if timing.unity else None,
+                render_frames=sim.render_frames)
 
 
 # ------------------------------------------------------------------------ CLI
@@ -368,14 +448,17 @@ def main(argv=None) -> int:
     p.add_argument("--port", type=int, default=4567)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--world", default="default", help="real | procedural:K | PATH.png")
-    p.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
-    p.add_argument("--fps", type=float, default=DEFAULT_FPS, help="frames/s in realtime mode")
+    p.add_argument("--mode", choices=MODES, default="realtime",
+                   help="realtime (default): the real simulator's loop on the wall clock, no sim_time; "
+                        "lockstep: one frame per command with the twin's sim_time, EASIER than the real simulator")
+    p.add_argument("--fps", type=float, default=DEFAULT_FPS, help="render frames/s in realtime mode")
+    p.add_argument("--extra-latency-ms", type=float, default=0.0,
+                   help="realtime: hold each command back this long on top of the real transport, ms")
     p.add_argument("--time-limit", type=float, default=0.0, help="stop after this many simulated s (0 = never)")
     p.add_argument("--record", default=None, help="record a simulator-format log into this folder")
     p.add_argument("--open-telemetry", type=int, default=OPEN_TELEMETRY_COUNT,
                    help="telemetry messages sent when the socket opens (the real sim: ~2)")
     a = parse_with_logging(p, argv)
-    from sim.mission import _recorder
     from sim.twin import RoverTwin
     from sim.world import load_world
 
@@ -384,11 +467,16 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
-    twin = RoverTwin(world, seed=a.seed)
-    recorder = _recorder(a.record)
+    if not (math.isfinite(a.fps) and a.fps > 0) or not (math.isfinite(a.extra_latency_ms) and a.extra_latency_ms >= 0):
+        p.error("--fps must be positive and --extra-latency-ms non-negative")
+    twin = RoverTwin(world, seed=a.seed, sim_time_field=a.mode == "lockstep")
+    recorder = open_recorder(a.record)
     limit = a.time_limit if a.time_limit and a.time_limit > 0 else math.inf
+    log.info("mode %s%s", a.mode, f" at {a.fps:g} fps" if a.mode == "realtime"
+             else " (EASIER than the real simulator: no latency, sim_time clock)")
     sim = WireSimulator(twin, a.host, a.port, a.mode, a.fps, recorder=recorder,
-                        should_stop=lambda: twin.sim_time >= limit, open_telemetry=a.open_telemetry)
+                        should_stop=lambda: twin.sim_time >= limit, open_telemetry=a.open_telemetry,
+                        extra_latency_s=a.extra_latency_ms / 1e3)
     try:
         sim.run()
     except KeyboardInterrupt:

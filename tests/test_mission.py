@@ -4,6 +4,7 @@ import json
 import pytest
 
 from sim.mission import StuckMeter, run_mission
+from sim.timing import WIRE_LATENCY_MS
 
 MISSION_S = 30.0  # simulated seconds: long enough to drive and map, short for CI
 
@@ -33,6 +34,9 @@ def test_short_mission_writes_metrics_and_png(world, tmp_path):
     assert data["longest_stuck_s"] <= data["stuck_time_s"] <= data["time_s"]
     assert isinstance(data["stuck_stretches"], list)
     assert data["shadows"] is False  # the default twin casts no shadows (the held-out real drives show none)
+    # the real simulator's loop by default, and the result says so
+    assert (data["timing"], data["fps"], data["latency_ms"]) == ("unity", 30.0, WIRE_LATENCY_MS)
+    assert data["telemetry_hz"] == pytest.approx(30.0, abs=0.5)
 
 
 def test_stuck_meter_counts_throttle_without_motion():
@@ -97,7 +101,7 @@ def test_evaluate_runs_seeds_on_two_workers(tmp_path):
 
     proc = subprocess.run([sys.executable, "-m", "sim.evaluate", "--seeds", "0-1", "--world", "procedural:0",
                            "--jobs", "2", "--time-limit", "1", "--out", str(tmp_path), "--no-progress",
-                           "--shadows", "off", "--home-by", "870"],
+                           "--shadows", "off", "--home-by", "870", "--fps", "15", "--latency-ms", "60"],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "leaked" not in proc.stderr, "worker processes were killed instead of joined"
@@ -108,6 +112,26 @@ def test_evaluate_runs_seeds_on_two_workers(tmp_path):
     assert "shadows off" in (tmp_path / "evaluation.md").read_text()
     assert res["meta"]["home_by_s"] == 870.0 and all(m["home_by_s"] == 870.0 for m in res["missions"])
     assert "client home by 870 s" in (tmp_path / "evaluation.md").read_text()
+    assert (res["meta"]["timing"], res["meta"]["fps"], res["meta"]["latency_ms"]) == ("unity", 15.0, 60.0)
+    assert all(m["fps"] == 15.0 and m["latency_ms"] == 60.0 for m in res["missions"])
+    assert "unity 15 fps, 60 ms latency" in (tmp_path / "evaluation.md").read_text()
     for name in ("evaluation.json", "evaluation.csv", "evaluation.md"):
         assert (tmp_path / name).stat().st_size > 0
     assert (tmp_path / "seed-1" / "mission.png").exists()
+
+
+def test_matrix_runs_every_condition_and_prints_one_table(tmp_path):
+    pytest.importorskip("sim.render")
+    from sim.evaluate import MATRIX_CONDITIONS, MissionOptions, run_matrix
+
+    res = run_matrix([0], "procedural:0", jobs=1, out=tmp_path, progress=False,
+                     options=MissionOptions(time_limit=1.0))
+    assert [r["condition"] for r in res["rows"]] == [c.name for c in MATRIX_CONDITIONS]
+    assert [(r["shadows"], r["fps"], r["latency_ms"]) for r in res["rows"]] == [
+        ("off", 30.0, WIRE_LATENCY_MS), ("on", 30.0, WIRE_LATENCY_MS), ("off", 15.0, 60.0)]
+    assert all(r["errors"] == 0 and r["mapped_median"] is not None for r in res["rows"])
+    md = (tmp_path / "matrix.md").read_text()
+    assert md == res["markdown"] and md.count("\n| shadows-") == 3
+    for cond in MATRIX_CONDITIONS:
+        meta = json.loads((tmp_path / cond.name / "evaluation.json").read_text())["meta"]
+        assert meta["shadows"] == ("on" if cond.shadows else "off") and meta["fps"] == cond.timing.fps

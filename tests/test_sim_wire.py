@@ -33,7 +33,8 @@ class FakeSocket:
 
 @pytest.fixture()
 def sim():
-    s = WireSimulator(RoverTwin(_flat_world(), seed=0, render=False), port=1)
+    s = WireSimulator(RoverTwin(_flat_world(), seed=0, render=False, sim_time_field=True), port=1,
+                      mode="lockstep")
     s.ws = FakeSocket()
     return s
 
@@ -91,7 +92,7 @@ def test_lockstep_against_real_client_server(tmp_path):
     pytest.importorskip("sim.render")
     from sim.world import default_world
 
-    twin = RoverTwin(default_world(), seed=4)
+    twin = RoverTwin(default_world(), seed=4, sim_time_field=True)
     payloads = []
     real_step = twin.step
 
@@ -132,15 +133,75 @@ def test_lockstep_against_real_client_server(tmp_path):
     assert not list(map_path.parent.glob(".*.tmp"))
 
 
-def test_realtime_mode_advances_without_commands():
+class FakeClock:
+    """Wall clock the test sets by hand."""
+
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+def _realtime(extra_latency_s=0.0):
+    clock = FakeClock()
     twin = RoverTwin(_flat_world(), seed=0, render=False)
-    sim = WireSimulator(twin, port=free_port(), mode="realtime", fps=200,
-                        should_stop=lambda: twin.frame >= 20)
+    sim = WireSimulator(twin, port=1, mode="realtime", fps=30, clock=clock, extra_latency_s=extra_latency_s)
     sim.ws = FakeSocket()
-    # no server: run() keeps reconnecting; drive frames by hand through the same path
-    for _ in range(5):
-        twin.advance_frame()
+    sim._open()  # the socket opened at wall 100.0: t = 0 of the scene
+    sim.ws.sent.clear()
+    return sim, twin, clock
+
+
+def test_realtime_physics_runs_on_without_commands():
+    sim, twin, clock = _realtime()
+    for k in range(1, 6):
+        clock.t = 100.0 + k / 30
+        sim.render_frame()
+    assert twin.sim_time == pytest.approx(0.16) and sim.ws.sent == []  # no command: no telemetry
+
+
+def test_realtime_command_waits_for_the_next_render_frame_and_is_answered_there():
+    sim, twin, clock = _realtime()
+    clock.t = 100.0 + 0.01
     sim._handle_frame(encode_event("data", {"throttle": "1", "steering_angle": "0"}))
-    assert twin.frame == 5  # real-time: a command does not advance time
-    tel = json.loads(sim.ws.sent[-1][2:])[1]
-    assert tel["throttle"] == "1.0000"
+    assert sim.ws.sent == [] and twin.controls.throttle == 0  # queued, not applied on arrival
+    clock.t = 100.0 + 1 / 30
+    sim.render_frame()
+    assert len(sim.ws.sent) == 1 and twin.controls.throttle == 1
+    tel = decode_event(sim.ws.sent[0])[1]
+    assert tel["throttle"] == "1.0000" and "sim_time" not in tel  # captured after the command acted
+    assert twin.sim_time == pytest.approx(0.02)  # the physics of that frame ran on the old inputs
+    for k in range(2, 30):  # no further command: physics goes on, no telemetry
+        clock.t = 100.0 + k / 30
+        sim.render_frame()
+    assert len(sim.ws.sent) == 1 and twin.truth.v > 0.5
+
+
+def test_realtime_sends_at_most_one_telemetry_per_render_frame():
+    sim, twin, clock = _realtime()
+    command = encode_event("data", {"throttle": "0.5", "steering_angle": "0"})
+    clock.t = 100.005  # a client that answers each telemetry 5 ms after it left
+    sim._handle_frame(command)
+    for k in range(1, 61):
+        sent = len(sim.ws.sent)
+        clock.t = 100.0 + k / 30
+        sim.render_frame()
+        assert len(sim.ws.sent) - sent <= 1
+        if len(sim.ws.sent) > sent:
+            clock.t += 0.005
+            sim._handle_frame(command)
+    assert len(sim.ws.sent) == 60  # one per frame: each answer makes the next frame
+    assert sim.reply_delays_s[1:] == pytest.approx([1 / 30] * 59)  # acted one frame after capture
+
+
+def test_realtime_extra_latency_holds_a_command_back():
+    sim, twin, clock = _realtime(extra_latency_s=0.05)
+    clock.t = 100.0 + 0.01
+    sim._handle_frame(encode_event("data", {"throttle": "1", "steering_angle": "0"}))
+    clock.t = 100.0 + 1 / 30
+    sim.render_frame()
+    assert sim.ws.sent == [] and twin.controls.throttle == 0  # due at 0.06 s
+    clock.t = 100.0 + 2 / 30
+    sim.render_frame()
+    assert len(sim.ws.sent) == 1 and twin.controls.throttle == 1
