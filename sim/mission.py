@@ -35,7 +35,7 @@ from drive_rover import add_home_by_option
 from sim.cli import add_shadows_option, parse_with_logging
 from sim.mission_parts import (HOME_RADIUS_M, StuckMeter, TruthTrack, nan_to_none, open_recorder,  # noqa: F401
                                progress_bar, write_json_atomic, write_npy_atomic, write_png_atomic)
-from sim.timing import Timing, VirtualClock, add_timing_options, frame_after, frame_time, timing_from_args
+from sim.timing import Timing, TwinLoop, add_timing_options, frame_after, frame_time, timing_from_args
 
 log = logging.getLogger(__name__)
 
@@ -158,7 +158,7 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
     watchers: objects with ``observe(client, event, force=False)`` called after every reply
     (the dashboard and the viewer's timeline), and once more with force=True at the end.
     """
-    from sim.twin import RoverTwin
+    from sim.twin import CommandError, RoverTwin
 
     timing = timing or Timing()
     if client_factory is None:
@@ -166,35 +166,29 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
 
         def client_factory(clock):
             return AutonomyClient(ground_truth=world.nav_truth, insets=False, home_by_s=home_by, clock=clock)
-    twin = RoverTwin(world, seed=seed, render=render, sim_time_field=timing.sends_sim_time)
-    clock = VirtualClock()
-    client = client_factory(clock)
-    tel = twin.reset(seed)
+    twin = RoverTwin(world, seed=seed, render=render)
+    loop = TwinLoop(twin, timing)
+    client = client_factory(loop.clock)
+    tel = loop.reset(seed)
     recorder = open_recorder(record)
     writer = _video_writer(video, 1.0 / telemetry_period_s(timing)) if video else None
     track = TruthTrack(twin)
-    delays = []
     end_reason, completed = "time limit", False
     bar = progress_bar(time_limit, progress, f"seed {seed}")
-    step = _unity_step if timing.unity else _lockstep_step
-    captured_at = 0.0  # time of the render frame that captured `tel`, s
     t_wall = time.perf_counter()
     try:
         while twin.sim_time < time_limit:
             if recorder is not None:
                 recorder.write_twin(twin)
-            # the client reads its clock when the telemetry reaches it (half the round trip)
-            clock.t = captured_at + timing.latency_ms / 2e3 if timing.unity else captured_at
             event, payload = client.handle_telemetry(tel)
             for watcher in watchers:
                 watcher.observe(client, event)
-            tel, dt, stall, acted_at = step(twin, timing, event, payload, captured_at)
-            if stall:
-                end_reason = f"stalled: {stall}"
-                log.warning("client sent a command the simulator cannot parse: %s", stall)
+            try:
+                tel, dt = loop.step(event, payload)
+            except CommandError as exc:  # the real simulator would stall here
+                end_reason = f"stalled: {exc}"
+                log.warning("client sent a command the simulator cannot parse: %s", exc)
                 break
-            delays.append(acted_at - captured_at)
-            captured_at = acted_at
             track.update(twin, dt)
             if writer is not None:
                 writer.write(_video_frame(twin.last_rgb, client.rover.worldmap))
@@ -215,32 +209,7 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
                 end_reason=end_reason, completed=completed,
                 worldmap=np.array(client.rover.worldmap, copy=True),
                 rejected=twin.rejected_commands, timing=timing,
-                reply_delay_ms=round(1e3 * statistics.median(delays), 1) if delays else None)
-
-
-def _lockstep_step(twin, timing, event, payload, captured_at):
-    """The twin's old loop: the command acts at once and time advances one frame."""
-    from sim.twin import CommandError
-
-    try:
-        tel = twin.step(event, payload)
-    except CommandError as exc:  # the real simulator would stall here
-        return None, 0.0, str(exc), captured_at
-    return tel, twin.frame_dt, None, captured_at + twin.frame_dt
-
-
-def _unity_step(twin, timing, event, payload, captured_at):
-    """The real loop: physics runs on while the reply travels; it acts at the next render frame."""
-    from sim.twin import CommandError
-
-    arrives = captured_at + timing.reply_delay_s
-    act_at = frame_time(frame_after(arrives, timing.fps), timing.fps)
-    dt = twin.advance_to(act_at)
-    try:
-        twin.apply(event, payload)
-    except CommandError as exc:  # no telemetry reply: the chain stalls for good
-        return None, dt, str(exc), act_at
-    return twin.capture(), dt, None, act_at
+                reply_delay_ms=round(1e3 * statistics.median(loop.delays), 1) if loop.delays else None)
 
 
 # ----------------------------------------------------------------------------- scoring

@@ -118,6 +118,55 @@ class VirtualClock:
         return self.t
 
 
+class TwinLoop:
+    """Drives a RoverTwin through one timing model on a virtual clock (in-process missions, envs).
+
+    ``clock`` is what the client must read as its wall clock.  ``step`` raises
+    sim.twin.CommandError (the real simulator would send no reply) and returns the next
+    telemetry and the simulated seconds it took.
+    """
+
+    def __init__(self, twin, timing: Timing | None = None):
+        self.twin = twin
+        self.timing = timing or Timing()
+        twin.sim_time_field = self.timing.sends_sim_time
+        self.clock = VirtualClock()
+        self.captured_at = 0.0  # time of the render frame that captured the last telemetry, s
+        self.delays = []  # per command: capture it answered -> the frame it acted at, s
+
+    def reset(self, seed=None, start_yaw=None) -> dict:
+        tel = self.twin.reset(seed, start_yaw=start_yaw)
+        self.captured_at = 0.0
+        self._set_clock()
+        return tel
+
+    def _set_clock(self):
+        # the client reads its clock when the telemetry reaches it: half the round trip after capture
+        t = self.captured_at
+        self.clock.t = t + self.timing.latency_ms / 2e3 if self.timing.unity else t
+
+    def step(self, event, payload=None):
+        """The client's reply to the last telemetry -> (next telemetry, simulated seconds elapsed)."""
+        if self.timing.unity:
+            tel, dt, acted_at = self._unity(event, payload)
+        else:
+            tel = self.twin.step(event, payload)
+            dt = self.twin.frame_dt
+            acted_at = self.captured_at + dt
+        self.delays.append(acted_at - self.captured_at)
+        self.captured_at = acted_at
+        self._set_clock()
+        return tel, dt
+
+    def _unity(self, event, payload):
+        """Physics runs on while the reply travels; it acts, and is answered, at the next render frame."""
+        t = self.timing
+        act_at = frame_time(frame_after(self.captured_at + t.reply_delay_s, t.fps), t.fps)
+        dt = self.twin.advance_to(act_at)
+        self.twin.apply(event, payload)  # CommandError: no reply, the chain stalls for good
+        return self.twin.capture(), dt, act_at
+
+
 def add_timing_options(parser) -> None:
     """--timing, --fps, --latency-ms, --compute-ms: the same on every tool."""
     parser.add_argument("--timing", choices=TIMING_MODELS, default=DEFAULT_TIMING,

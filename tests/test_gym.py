@@ -120,7 +120,7 @@ def test_baseline_policy_drives_exactly_like_the_client_on_the_twin():
         obs, *_ = env.step(policy(obs))
         gym_path.append(env.twin.pose())
 
-    twin = RoverTwin(env.world, seed=3)
+    twin = RoverTwin(env.world, seed=3, sim_time_field=True)  # lockstep, with the clock the env obs carry
     client = AutonomyClient(ground_truth=env.world.nav_truth, insets=False)
     tel = twin.reset(3)
     twin_path = []

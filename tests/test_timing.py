@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.mission import _unity_step, run_inprocess
-from sim.timing import Timing, VirtualClock, frame_after, physics_steps_at
+from sim.mission import run_inprocess
+from sim.timing import Timing, TwinLoop, frame_after, physics_steps_at
 from sim.twin import RoverTwin
 from sim.world import World
 
@@ -48,10 +48,11 @@ def test_no_sim_time_unless_asked():
 def _drive_once(latency_ms, until_s=0.5):
     """Capture at t=0, answer with full throttle after latency_ms, then let physics run on."""
     twin = RoverTwin(_flat_world(), seed=0, render=False)
-    twin.reset(0, start_yaw=0.0)
-    tel, dt, stall, acted_at = _unity_step(twin, Timing(fps=30, latency_ms=latency_ms, compute_ms=0.0),
-                                           "data", DRIVE, 0.0)
-    assert stall is None
+    loop = TwinLoop(twin, Timing(fps=30, latency_ms=latency_ms, compute_ms=0.0))
+    loop.reset(0, start_yaw=0.0)
+    tel, dt = loop.step("data", DRIVE)
+    acted_at = loop.captured_at
+    assert loop.clock() == pytest.approx(acted_at + latency_ms / 2e3)  # read when the telemetry arrives
     at_capture = (twin.sim_time, twin.truth.x)
     twin.advance_to(until_s)
     return tel, acted_at, at_capture, twin.truth.x
