@@ -12,7 +12,6 @@ located are scored when a worldmap snapshot could be read.
 from __future__ import annotations
 
 import logging
-import math
 import os
 import shutil
 import subprocess
@@ -82,28 +81,24 @@ def _log_tail(path) -> bytes:
 
 def run_client_summary(world, seed, client_path, time_limit=900.0, progress=True, fps=None):
     """Run the mission; returns the summary dict sim.mission.finish_mission scores (+ "client_log" bytes)."""
-    from sim.mission import HOME_RADIUS_M, StuckMeter, _progress
+    from sim.mission_parts import TruthTrack, all_collected_and_home, progress_bar
+    from sim.timing import Timing
     from sim.twin import RoverTwin
     from sim.wire import DEFAULT_FPS, WireSimulator, free_port, stop_process, wait_for_port
 
-    twin = RoverTwin(world, seed=seed)
+    twin = RoverTwin(world, seed=seed)  # no sim_time: such clients time themselves
     port = free_port()
     workdir = tempfile.mkdtemp(prefix="twin-any-client-")
-    state = {"end": "time limit", "completed": False, "still_home_s": 0.0, "distance": 0.0}
-    stuck = StuckMeter()
-    traj = [(twin.truth.x, twin.truth.y)]
-    bar = _progress(time_limit, progress, f"seed {seed} ({Path(client_path).name})")
+    state = {"end": "time limit", "completed": False, "still_home_s": 0.0}
+    track = TruthTrack(twin)
+    bar = progress_bar(time_limit, progress, f"seed {seed} ({Path(client_path).name})")
     proc = None
 
-    def on_frame(tw):
-        tr = tw.truth
-        state["distance"] += math.hypot(tr.x - traj[-1][0], tr.y - traj[-1][1])
-        traj.append((tr.x, tr.y))
-        stuck.update(tr.sim_time, tw.frame_dt, tr.x, tr.y, tr.v, tw.controls.throttle, tr.picking_up)
-        bar.update(tw.frame_dt)
-        done = (tr.initial_samples and len(tr.collected) == len(tr.initial_samples)
-                and math.hypot(tr.x - tr.start_xy[0], tr.y - tr.start_xy[1]) <= HOME_RADIUS_M and abs(tr.v) < 0.01)
-        state["still_home_s"] = state["still_home_s"] + tw.frame_dt if done else 0.0
+    def on_frame(tw, dt):
+        track.update(tw, dt)
+        bar.update(dt)
+        done = all_collected_and_home(tw.truth) and abs(tw.truth.v) < 0.01
+        state["still_home_s"] = state["still_home_s"] + dt if done else 0.0
 
     def should_stop():
         if twin.sim_time >= time_limit:
@@ -137,9 +132,10 @@ def run_client_summary(world, seed, client_path, time_limit=900.0, progress=True
         shutil.rmtree(workdir, ignore_errors=True)  # our own temp folder
     if worldmap is None:
         log.info("no readable worldmap from %s: mapped/fidelity not scored", client_path)
-    return dict(twin=twin, stuck=stuck, traj=traj, distance=state["distance"], wall=time.perf_counter() - t0,
-                end_reason=state["end"], completed=state["completed"], worldmap=worldmap, rejected=wire.rejected,
-                client_log=client_log, commands=wire.commands)
+    return dict(twin=twin, stuck=track.stuck, traj=track.traj, distance=track.distance,
+                wall=time.perf_counter() - t0, end_reason=state["end"], completed=state["completed"],
+                worldmap=worldmap, rejected=wire.rejected, client_log=client_log, commands=wire.commands,
+                timing=Timing(fps=fps or DEFAULT_FPS))
 
 
 def run_client_mission(world, seed, client_path, time_limit=900.0, out=None, progress=True, write_files=True,
