@@ -39,6 +39,11 @@ FINE_STEP_MIN_M = 0.04  # smallest march step near the camera, m
 FINE_STEP_PER_M = 0.012  # march step growth with distance, m per m
 REFINE_ITERS = 4  # bisection steps locating a rock surface between two march samples
 COARSE_CELL_M = 1.0  # empty-space-skipping cell size, m
+BLOCK_CELLS = 8  # coarse cells per side of the second skipping level (sky and far rays), count
+DARK_LUT_STEP_M = 0.02  # distance resolution of the distance-darkening table, m
+DARK_LUT_MAX_M = 200.0  # the table's reach (farther hits use its last entry), m
+WEIGHT_BITS = 13  # fixed-point bits of the colour blend weights (blend error < 0.1 grey level)
+LANE_BITS = 21  # bits per channel lane of a packed colour: 255 x 2**13 x (1 + rounding) fits
 GAP_MIN_M = 0.3  # rock bottom this far above the ground leaves a see-through gap, m
 GAP_MAX_GROUND_M = 0.5  # gaps are kept only over floor this low (wall rocks are drawn solid), m
 SHADOW_GRID_STRIDE = 2  # shadows are baked on every N-th vertex of the 0.1 m grid
@@ -72,6 +77,8 @@ SAMPLE_WIDTH_PER_SCALE_M = 0.37  # sample width at prefab scale 1, m
 SAMPLE_HEIGHT_PER_SCALE_M = 0.32  # sample height at prefab scale 1, m
 SAMPLE_SINK_M = 0.02  # samples are sunk this much into the floor, m
 SAMPLE_MIN_SHADE = 0.62  # darkest shading of a sample, fraction of full colour
+SAMPLE_GROUND_CACHE = 256  # sample spots whose ground height a renderer remembers, count
+SAMPLE_RGB_255 = np.array(SAMPLE_RGB) * 255.0  # the same gold in 0..255 (read by the numba drawer)
 
 
 def _rot_x(a):
@@ -219,7 +226,9 @@ def bake_rasters(world: World):
     # free band under overhangs per coarse cell: above every ground, below every rock bottom
     cground = _coarse_max(ground, kc)
     cbottom = -_coarse_max(-slab_lo, kc)  # lowest rock bottom (-1e9 solid rock, 1e9 open sky)
-    return {"top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
+    return {"cflat": _coarse_flat(ground, slab_hi, kc), "bmax": _block_max(cmax, BLOCK_CELLS),
+            "colour64": pack_rgb(colour_ground), "rock64": pack_rgb(colour_rock),
+            "top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
             "has_gap": has_gap, "colour": colour_ground, "colour_rock": colour_rock, "cmax": cmax,
             "cground": cground, "cbottom": cbottom,
             "sand": sand.astype(np.float32), "shadow": shadow.astype(np.float32),
@@ -235,6 +244,29 @@ def _coarse_max(top: np.ndarray, k: int) -> np.ndarray:
     edge_r = dil[k::k, : n * k].reshape(n, n, k).max(axis=2)  # row after each block
     edge_c = dil[: n * k, k::k].reshape(n, k, n).max(axis=1)
     return np.maximum(np.maximum(blocks, edge_r), edge_c).astype(np.float32)
+
+
+def _coarse_flat(ground: np.ndarray, slab_hi: np.ndarray, k: int) -> np.ndarray:
+    """Per coarse cell: the floor height where the whole cell (with the kernel's support) is one level
+    plane without rock, else NaN. The kernel intersects such cells analytically."""
+    gmax = _coarse_max(ground, k)
+    gmin = -_coarse_max(-ground, k)
+    rock = _coarse_max(slab_hi, k) > -1e8
+    return np.where((gmax == gmin) & ~rock, gmax, np.nan).astype(np.float32)
+
+
+def _block_max(cmax: np.ndarray, cells: int) -> np.ndarray:
+    """Max of the coarse max over blocks of `cells` x `cells` coarse cells (edge blocks padded)."""
+    nb = -(-cmax.shape[0] // cells)
+    pad = np.full((nb * cells, nb * cells), np.inf, np.float32)  # outside the world: never skipped
+    pad[: cmax.shape[0], : cmax.shape[1]] = cmax
+    return pad.reshape(nb, cells, nb, cells).max(axis=(1, 3))
+
+
+def _darkening_lut() -> np.ndarray:
+    """Brightness factor by viewing distance (one entry per DARK_LUT_STEP_M): the far floor darkens."""
+    dist = np.arange(int(DARK_LUT_MAX_M / DARK_LUT_STEP_M) + 1) * DARK_LUT_STEP_M
+    return (1.0 - DIST_DARKEN * (1.0 - np.exp(-dist / DIST_SCALE_M))).astype(np.float64)
 
 
 # ---------------------------------------------------------------------- marching
@@ -286,16 +318,94 @@ def _solid(ground, slab_lo, slab_hi, inv_cell, x, y, z):
     return 0
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _exit_dist(x, y, inv_hx, inv_hy, ci, ri, size):
+    """Horizontal distance from (x, y) along a ray with reciprocal direction (inv_hx, inv_hy) until it
+    leaves grid cell (ci, ri) of side `size` (a zero direction component has reciprocal 0: never)."""
+    ex = 1e9
+    if inv_hx > 0.0:
+        ex = ((ci + 1) * size - x) * inv_hx
+    elif inv_hx < 0.0:
+        ex = (ci * size - x) * inv_hx
+    ey = 1e9
+    if inv_hy > 0.0:
+        ey = ((ri + 1) * size - y) * inv_hy
+    elif inv_hy < 0.0:
+        ey = (ri * size - y) * inv_hy
+    return min(ex, ey) + 1e-4
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _ray_table(rot, ray_a, ray_b, table):
+    """Per pixel (column-major) the ray's horizontal unit direction, slope and reciprocals.
+
+    table[c, u, v]: 0 hx, 1 hy, 2 k = dz / |d_h|, 3 1/|d_h|, 4 1/hx, 5 1/hy (0 for a zero component),
+    6 |d| / |d_h| (distance per horizontal metre). One branch-free loop, so it vectorises.
+    """
+    for u in range(ray_a.shape[0]):
+        a = ray_a[u]
+        col_x = rot[0, 0] * a + rot[0, 2]
+        col_y = rot[1, 0] * a + rot[1, 2]
+        col_z = rot[2, 0] * a + rot[2, 2]
+        for v in range(ray_b.shape[0]):
+            b = ray_b[v]
+            dx = col_x + rot[0, 1] * b
+            dy = col_y + rot[1, 1] * b
+            dz = col_z + rot[2, 1] * b
+            hlen = max(math.sqrt(dx * dx + dy * dy), 1e-9)
+            inv_h = 1.0 / hlen
+            hx = dx * inv_h
+            hy = dy * inv_h
+            k = dz * inv_h
+            table[0, u, v] = hx
+            table[1, u, v] = hy
+            table[2, u, v] = k
+            table[3, u, v] = inv_h
+            table[4, u, v] = 1.0 / hx if abs(hx) > 1e-12 else 0.0
+            table[5, u, v] = 1.0 / hy if abs(hy) > 1e-12 else 0.0
+            table[6, u, v] = math.sqrt(1.0 + k * k)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _bilinear_in(grid, inv_cell, x, y):
+    """Bilinear sample of a vertex grid at a point known to lie inside the world (no clamping)."""
+    fx = x * inv_cell
+    fy = y * inv_cell
+    c = int(fx)
+    r = int(fy)
+    tx = fx - c
+    ty = fy - r
+    return ((grid[r, c] * (1 - tx) + grid[r, c + 1] * tx) * (1 - ty)
+            + (grid[r + 1, c] * (1 - tx) + grid[r + 1, c + 1] * tx) * ty)
+
+
 @njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
-def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colour_rock, cmax,
-                   cground, cbottom, cell, coarse_m, rot, origin,
-                   ray_a, ray_b, far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
-                   underside_shade, world_size, dist_darken, dist_scale):
-    w_img, h_img = img_t.shape[0], img_t.shape[1]
+def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64, cmax,
+                   cground, cbottom, cflat, bmax, block_m, cell, coarse_m, origin,
+                   far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
+                   underside_shade, world_size, dark_lut, dark_lut_step):
+    """Column-wise raymarch into row-major (H, W, 3) image and (H, W) depth (module docstring).
+
+    Free space is skipped per block_m block (above everything in it) and per coarse_m cell
+    (above everything, or in the free band under an overhang); a coarse cell whose floor is one
+    level plane without rock is hit analytically. Everything else is marched in fine steps; a
+    coarse cell's summary is loaded once per visit, not once per fine step. Colours are packed
+    three channels to an int64 (LANE_BITS each) so a bilinear blend is four integer multiplies.
+    """
+    h_img, w_img = depth.shape
     inv_cell = 1.0 / cell
+    inv_coarse = 1.0 / coarse_m
+    inv_block = 1.0 / block_m
     n = ground.shape[0]
     nc = cmax.shape[0]
+    nb = bmax.shape[0]
     ox, oy, oz = origin[0], origin[1], origin[2]
+    inv_lut_step = 1.0 / dark_lut_step
+    n_lut = dark_lut.shape[0]
+    lane_mask = (1 << 8) - 1
+    half = 1 << (WEIGHT_BITS - 1)
+    rounding = half | (half << LANE_BITS) | (half << (2 * LANE_BITS))
+    wscale = float(1 << WEIGHT_BITS)
     for u in range(w_img):
         prev_s = 0.0  # where the ray below ended (hit, sky or far), horizontal m
         sky_rest = False
@@ -303,24 +413,25 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
         g_first = -1.0
         g_last = -1.0
         g_bottom = 1e9
+        # summary of the last coarse cell looked up (reused while rays stay in it)
+        ci_c = -1
+        ri_c = -1
+        cm = 0.0
+        cg = 0.0
+        cb = 0.0
+        gz = 0.0
+        rock_here = True
         for v in range(h_img - 1, -1, -1):
             if sky_rest:
                 for ch in range(3):
-                    img_t[u, v, ch] = sky_rgb[ch]
-                depth_t[u, v] = np.inf
-                hit_t[u, v, 0] = np.nan
+                    img[v, u, ch] = sky_rgb[ch]
+                depth[v, u] = np.inf
                 continue
-            a = ray_a[u]
-            b = ray_b[v]
-            dx = rot[0, 0] * a + rot[0, 1] * b + rot[0, 2]
-            dy = rot[1, 0] * a + rot[1, 1] * b + rot[1, 2]
-            dz = rot[2, 0] * a + rot[2, 1] * b + rot[2, 2]
-            hlen = math.sqrt(dx * dx + dy * dy)
-            if hlen < 1e-9:
-                hlen = 1e-9
-            hx = dx / hlen
-            hy = dy / hlen
-            k = dz / hlen
+            hx = table[0, u, v]
+            hy = table[1, u, v]
+            k = table[2, u, v]
+            inv_hx = table[4, u, v]
+            inv_hy = table[5, u, v]
             # Coherence: this ray is above the one below, so it is free wherever that ray was free
             # in open air; only where that ray passed under an overhang may this one hit earlier
             # (the underside), and only if it can climb to the overhang's bottom.
@@ -336,13 +447,22 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
             else:
                 s = prev_s
             s_free = s
+            f_free = -1.0  # height above the ground at s_free when a fine step measured it, else < 0
             state = 0
             hit = 0  # 0 none, 1 surface, 2 sky, 3 far
+            x = 0.0
+            y = 0.0
+            z = 0.0
+            g = 0.0
+            cell_end = -1.0  # the coarse cell being marched in fine steps ends here
+            z_exit = 0.0
+            inside = True
             while True:
                 if jump_from >= 0.0 and s > jump_from:
                     if s < jump_to:
                         s = jump_to
                         s_free = s
+                        f_free = -1.0
                     jump_from = -1.0
                 if s > far_m:
                     hit = 3
@@ -355,59 +475,118 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
                     break
                 inside = x >= 0.0 and y >= 0.0 and x < world_size and y < world_size
                 if inside:
-                    ci = int(x / coarse_m)
-                    ri = int(y / coarse_m)
-                    if ci >= nc:
-                        ci = nc - 1
-                    if ri >= nc:
-                        ri = nc - 1
-                    cm = cmax[ri, ci]
-                    above = z > cm
-                    under = (not above) and cground[ri, ci] < z < cbottom[ri, ci]
-                    if above or under:
-                        # distance to leave this coarse cell
-                        if hx > 1e-12:
-                            ex = ((ci + 1) * coarse_m - x) / hx
-                        elif hx < -1e-12:
-                            ex = (ci * coarse_m - x) / hx
-                        else:
-                            ex = 1e9
-                        if hy > 1e-12:
-                            ey = ((ri + 1) * coarse_m - y) / hy
-                        elif hy < -1e-12:
-                            ey = (ri * coarse_m - y) / hy
-                        else:
-                            ey = 1e9
-                        ds = min(ex, ey) + 1e-4
-                        z_exit = oz + (s + ds) * k
-                        if (above and z_exit > cm) or (under and cground[ri, ci] < z_exit < cbottom[ri, ci]):
-                            if under and cbottom[ri, ci] < 1e8:  # passing under an overhang
-                                if g_first < 0.0:
-                                    g_first = s
-                                g_last = max(g_last, s + ds)
-                                g_bottom = min(g_bottom, cbottom[ri, ci])
-                            s_free = s + ds
-                            s = s_free
+                    if s >= cell_end:  # entering a coarse cell
+                        ci = min(int(x * inv_coarse), nc - 1)
+                        ri = min(int(y * inv_coarse), nc - 1)
+                        if ci != ci_c or ri != ri_c:
+                            # whole block above everything in it: skip the block
+                            bi = min(int(x * inv_block), nb - 1)
+                            bj = min(int(y * inv_block), nb - 1)
+                            bm = bmax[bj, bi]
+                            if z > bm:
+                                ds = _exit_dist(x, y, inv_hx, inv_hy, bi, bj, block_m)
+                                if oz + (s + ds) * k > bm:
+                                    s += ds
+                                    s_free = s
+                                    f_free = -1.0
+                                    continue
+                            ci_c = ci
+                            ri_c = ri
+                            cm = cmax[ri, ci]
+                            cg = cground[ri, ci]
+                            cb = cbottom[ri, ci]
+                            gz = cflat[ri, ci]
+                            rock_here = cb < 1e8
+                        cell_end = s + _exit_dist(x, y, inv_hx, inv_hy, ci, ri, coarse_m)
+                        z_exit = oz + cell_end * k
+                        if gz == gz:  # level floor without rock: the plane z = gz is the only surface
+                            if z <= gz:
+                                state = 1
+                                hit = 1
+                                break
+                            if k < 0.0:
+                                s_hit = (gz - oz) / k
+                                if s_hit < cell_end:
+                                    s = max(s_hit, s)
+                                    s_free = s
+                                    x = ox + s * hx
+                                    y = oy + s * hy
+                                    z = oz + s * k
+                                    state = 1
+                                    hit = 1
+                                    break
+                            s = cell_end
+                            s_free = s
+                            f_free = -1.0
                             continue
-                state = _solid(ground, slab_lo, slab_hi, inv_cell, x, y, z)
-                if state == 1 or state == 3:
-                    hit = 1
-                    break
-                if state == 2:
-                    if g_first < 0.0:
-                        g_first = s
-                    g_last = max(g_last, s)
-                    g_bottom = min(g_bottom, slab_lo[_nearest(n, inv_cell, y), _nearest(n, inv_cell, x)])
+                    if z > cm:
+                        if z_exit > cm:  # above everything to the cell's end
+                            s = cell_end
+                            s_free = s
+                            f_free = -1.0
+                            continue
+                    elif cg < z < cb and cg < z_exit < cb:  # in the free band under a rock
+                        if cb < 1e8:  # passing under an overhang
+                            if g_first < 0.0:
+                                g_first = s
+                            g_last = max(g_last, cell_end)
+                            g_bottom = min(g_bottom, cb)
+                        s = cell_end
+                        s_free = s
+                        f_free = -1.0
+                        continue
+                    # fine step: terrain (bilinear) or the rock slab of the nearest 0.1 m cell
+                    g = _bilinear_in(ground, inv_cell, x, y)
+                    if z <= g:
+                        state = 1
+                        hit = 1
+                        break
+                    if rock_here:
+                        rr = int(y * inv_cell + 0.5)
+                        cc = int(x * inv_cell + 0.5)
+                        if z <= slab_hi[rr, cc]:
+                            lo_r = slab_lo[rr, cc]
+                            if z >= lo_r:
+                                state = 3
+                                hit = 1
+                                break
+                            # free under an overhanging slab
+                            if g_first < 0.0:
+                                g_first = s
+                            g_last = max(g_last, s)
+                            g_bottom = min(g_bottom, lo_r)
+                else:  # outside the world: its border continues (clamped lookups)
+                    cell_end = -1.0
+                    g = _top_at(ground, inv_cell, x, y)
+                    if z <= g:
+                        state = 1
+                        hit = 1
+                        break
+                    rr = _nearest(n, inv_cell, y)
+                    cc = _nearest(n, inv_cell, x)
+                    if z <= slab_hi[rr, cc]:
+                        lo_r = slab_lo[rr, cc]
+                        if z >= lo_r:
+                            state = 3
+                            hit = 1
+                            break
+                        if g_first < 0.0:
+                            g_first = s
+                        g_last = max(g_last, s)
+                        g_bottom = min(g_bottom, lo_r)
                 s_free = s
-                step = step_min + step_k * s
-                s += step
+                f_free = z - g
+                s += step_min + step_k * s
             if hit == 1:
                 lo = s_free
                 hi = s
                 if state == 1 and hi > lo:
                     # terrain: one secant step on z - ground (smooth surface)
-                    f_lo = (oz + lo * k) - _top_at(ground, inv_cell, ox + lo * hx, oy + lo * hy)
-                    f_hi = z - _top_at(ground, inv_cell, x, y)
+                    if f_free > 0.0:
+                        f_lo = f_free
+                    else:
+                        f_lo = (oz + lo * k) - _top_at(ground, inv_cell, ox + lo * hx, oy + lo * hy)
+                    f_hi = z - g
                     if f_lo > 0.0 and f_hi <= 0.0 and f_lo - f_hi > 1e-9:
                         hi = lo + (hi - lo) * f_lo / (f_lo - f_hi)
                 elif hi > lo:
@@ -420,49 +599,53 @@ def _render_kernel(img_t, depth_t, hit_t, ground, slab_lo, slab_hi, colour, colo
                             hi = mid
                         else:
                             lo = mid
-                s = hi
-                x = ox + s * hx
-                y = oy + s * hy
-                z = oz + s * k
-                fx = min(max(x * inv_cell, 0.0), n - 1 - 1e-4)
-                fy = min(max(y * inv_cell, 0.0), n - 1 - 1e-4)
-                c0 = int(fx)
-                r0 = int(fy)
-                tx = fx - c0
-                ty = fy - r0
-                shade = 1.0
-                dist = s * math.sqrt(1.0 + k * k)
-                shade *= 1.0 - dist_darken * (1.0 - math.exp(-dist / dist_scale))
+                if hi != s:
+                    s = hi
+                    x = ox + s * hx
+                    y = oy + s * hy
+                    z = oz + s * k
+                li = int(s * table[6, u, v] * inv_lut_step)
+                shade = dark_lut[li] if li < n_lut else dark_lut[n_lut - 1]
                 if state == 1:  # terrain: bilinear ground colour
-                    for ch in range(3):
-                        val = ((colour[r0, c0, ch] * (1 - tx) + colour[r0, c0 + 1, ch] * tx) * (1 - ty)
-                               + (colour[r0 + 1, c0, ch] * (1 - tx) + colour[r0 + 1, c0 + 1, ch] * tx) * ty)
-                        img_t[u, v, ch] = np.uint8(min(255.0, val * shade + 0.5))
+                    fx = min(max(x * inv_cell, 0.0), n - 1 - 1e-4)
+                    fy = min(max(y * inv_cell, 0.0), n - 1 - 1e-4)
+                    c0 = int(fx)
+                    r0 = int(fy)
+                    tx = fx - c0
+                    ty = fy - r0
+                    ws = wscale * shade
+                    acc = (colour64[r0, c0] * int((1.0 - tx) * (1.0 - ty) * ws + 0.5)
+                           + colour64[r0, c0 + 1] * int(tx * (1.0 - ty) * ws + 0.5)
+                           + colour64[r0 + 1, c0] * int((1.0 - tx) * ty * ws + 0.5)
+                           + colour64[r0 + 1, c0 + 1] * int(tx * ty * ws + 0.5) + rounding)
                 else:  # rock slab: nearest cell, darker on the underside of an overhang
                     rr = _nearest(n, inv_cell, y)
                     cc = _nearest(n, inv_cell, x)
                     if -1e8 < slab_lo[rr, cc] < 1e8 and z < slab_lo[rr, cc] + 0.3:
                         shade *= underside_shade
-                    for ch in range(3):
-                        img_t[u, v, ch] = np.uint8(min(255.0, colour_rock[rr, cc, ch] * shade + 0.5))
-                depth_t[u, v] = s / hlen
-                hit_t[u, v, 0] = x
-                hit_t[u, v, 1] = y
-                hit_t[u, v, 2] = z
+                    acc = rock64[rr, cc] * int(wscale * shade + 0.5) + rounding
+                img[v, u, 0] = (acc >> WEIGHT_BITS) & lane_mask
+                img[v, u, 1] = (acc >> (WEIGHT_BITS + LANE_BITS)) & lane_mask
+                img[v, u, 2] = (acc >> (WEIGHT_BITS + 2 * LANE_BITS)) & lane_mask
+                depth[v, u] = s * table[3, u, v]
                 prev_s = s
             elif hit == 2:
                 for ch in range(3):
-                    img_t[u, v, ch] = sky_rgb[ch]
-                depth_t[u, v] = np.inf
-                hit_t[u, v, 0] = np.nan
+                    img[v, u, ch] = sky_rgb[ch]
+                depth[v, u] = np.inf
                 sky_rest = g_first < 0.0
                 prev_s = s
             else:
                 for ch in range(3):
-                    img_t[u, v, ch] = far_rgb[ch]
-                depth_t[u, v] = np.inf
-                hit_t[u, v, 0] = np.nan
+                    img[v, u, ch] = far_rgb[ch]
+                depth[v, u] = np.inf
                 prev_s = far_m
+
+
+def pack_rgb(rgb: np.ndarray) -> np.ndarray:
+    """uint8 (..., 3) -> int64 with each channel in its own LANE_BITS-bit lane (for the kernel's blend)."""
+    c = rgb.astype(np.int64)
+    return c[..., 0] | (c[..., 1] << LANE_BITS) | (c[..., 2] << (2 * LANE_BITS))
 
 
 _BAKE_CACHE = []  # [(weakref to World, baked rasters)], most recent last
@@ -498,12 +681,18 @@ class Renderer:
         self._cground = baked["cground"]
         self._cbottom = baked["cbottom"]
         self.baked = baked
-        self._zmax = float(self._top.max()) + 0.01
-        self._ray_a = ((np.arange(IMAGE_W) + 0.5 - CX) / FOCAL_PX).astype(np.float64)
-        self._ray_b = ((CY - (np.arange(IMAGE_H) + 0.5)) / FOCAL_PX).astype(np.float64)
-        self._sky = np.array(SKY_RGB, np.uint8)
-        self._far = np.array(FAR_RGB, np.uint8)
+        self.zmax = float(self._top.max()) + 0.01
+        self.ray_a = ((np.arange(IMAGE_W) + 0.5 - CX) / FOCAL_PX).astype(np.float64)
+        self.ray_b = ((CY - (np.arange(IMAGE_H) + 0.5)) / FOCAL_PX).astype(np.float64)
+        self.sky_rgb = np.array(SKY_RGB, np.uint8)
+        self.far_rgb = np.array(FAR_RGB, np.uint8)
+        self._dark_lut = _darkening_lut()
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
+        self._last_camera = None
+        self._table = np.empty((7, IMAGE_W, IMAGE_H), np.float32)  # per-pixel ray constants, see _ray_table
+        self._sample_ground = {}  # (x, y) of a sample spot -> terrain height there, m
+        az, el = math.radians(SUN_AZIMUTH_DEG), math.radians(SUN_ELEVATION_DEG)
+        self._sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
 
     def camera(self, pose):
         """(origin xyz in world, 3x3 rotation whose columns are right/up/forward) for a pose."""
@@ -524,74 +713,124 @@ class Renderer:
         samples: iterable of (x, y, scale, yaw_deg) gold sample rocks to draw.
         """
         origin, rot = self.camera(pose)
-        # column-major buffers: the kernel walks columns, so it writes contiguous memory
-        img_t = np.empty((IMAGE_W, IMAGE_H, 3), np.uint8)
-        depth_t = np.empty((IMAGE_W, IMAGE_H), np.float32)
-        hit_t = np.full((IMAGE_W, IMAGE_H, 3), np.nan, np.float32)  # sky stays nan in all three (the kernel writes x only)
-        _render_kernel(img_t, depth_t, hit_t, self._ground, self._slab_lo, self._slab_hi, self.colour_map,
-                       self._colour_rock, self._cmax, self._cground, self._cbottom,
-                       float(self.world.rock_cell_m), COARSE_CELL_M,
-                       np.ascontiguousarray(rot), origin, self._ray_a, self._ray_b, FAR_M,
-                       FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self._zmax, self._sky,
-                       self._far, UNDERSIDE_SHADE, float(self.world.size_m), DIST_DARKEN,
-                       DIST_SCALE_M)
-        img = np.ascontiguousarray(img_t.transpose(1, 0, 2))
-        depth = np.ascontiguousarray(depth_t.T)
-        hitpos = hit_t.transpose(1, 0, 2)
-        for sample in samples:
-            self._draw_sample(img, depth, origin, rot, sample)
+        img = np.empty((IMAGE_H, IMAGE_W, 3), np.uint8)
+        depth = np.empty((IMAGE_H, IMAGE_W), np.float32)
+        _ray_table(rot, self.ray_a, self.ray_b, self._table)
+        b = self.baked
+        _render_kernel(img, depth, self._table, b["ground"], b["slab_lo"], b["slab_hi"], b["colour64"],
+                       b["rock64"], b["cmax"], b["cground"], b["cbottom"], b["cflat"], b["bmax"],
+                       BLOCK_CELLS * COARSE_CELL_M, float(self.world.rock_cell_m), COARSE_CELL_M,
+                       origin, FAR_M, FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self.zmax,
+                       self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
+                       self._dark_lut, DARK_LUT_STEP_M)
+        self.draw_samples(img, depth, origin, rot, samples)
         self.last_depth = depth  # distance along the ray / |forward|, inf for sky
-        self.last_hit = hitpos  # world (x, y, z) of each pixel's surface, all nan for sky
+        self._last_camera = (origin, rot)
         return img
 
-    # ------------------------------------------------------------------ samples
-    def _draw_sample(self, img, depth, origin, rot, sample):
-        """Shaded gold ellipsoid standing on the ground, with a depth test."""
-        sx, sy, scale, syaw = (float(v) for v in sample)
-        if not all(math.isfinite(v) for v in (sx, sy, scale, syaw)):
-            return
-        half_w = 0.5 * SAMPLE_WIDTH_PER_SCALE_M * scale
-        half_h = 0.5 * SAMPLE_HEIGHT_PER_SCALE_M * scale
-        ground = float(self.world.height_at(sx, sy))
-        centre = np.array([sx, sy, ground + half_h - SAMPLE_SINK_M])
-        rel = centre - origin
-        cam = rot.T @ rel  # right, up, forward
+    @property
+    def last_hit(self) -> np.ndarray:
+        """World (x, y, z) of each pixel of the last frame (float32 (H, W, 3)), all nan for sky."""
+        if self._last_camera is None:
+            return np.full((IMAGE_H, IMAGE_W, 3), np.nan, np.float32)
+        origin, rot = self._last_camera
+        uu, vv = np.meshgrid(self.ray_a, self.ray_b)
+        dirs = rot[:, 0] * uu[..., None] + rot[:, 1] * vv[..., None] + rot[:, 2]
+        with np.errstate(invalid="ignore"):
+            hit = origin + self.last_depth[..., None].astype(np.float64) * dirs
+        hit[~np.isfinite(self.last_depth)] = np.nan
+        return hit.astype(np.float32)
+
+    def draw_samples(self, img, depth, origin, rot, samples):
+        """Draw gold sample rocks (shaded ellipsoids standing on the ground) into a frame in place,
+        depth-tested against `depth` (which they update)."""
+        params = self._sample_params(samples)
+        if len(params):
+            _draw_samples_kernel(img, depth, np.ascontiguousarray(rot), origin, self.ray_a, self.ray_b,
+                                 params, self._sun, SAMPLE_MIN_SHADE, FAR_M, FOCAL_PX, CX, CY)
+
+    def _sample_params(self, samples) -> np.ndarray:
+        """(N, 8) float64 per finite sample: centre xyz, half width, half height, cos/sin yaw, scale."""
+        rows = []
+        for sample in samples:
+            sx, sy, scale, syaw = (float(v) for v in sample)
+            if not all(math.isfinite(v) for v in (sx, sy, scale, syaw)):
+                continue
+            key = (sx, sy)
+            ground = self._sample_ground.get(key)
+            if ground is None:  # samples never move: one terrain lookup per spot
+                if len(self._sample_ground) > SAMPLE_GROUND_CACHE:
+                    self._sample_ground.clear()
+                ground = self._sample_ground[key] = float(self.world.height_at(sx, sy))
+            half_w = 0.5 * SAMPLE_WIDTH_PER_SCALE_M * scale
+            half_h = 0.5 * SAMPLE_HEIGHT_PER_SCALE_M * scale
+            yaw = math.radians(syaw)
+            rows.append((sx, sy, ground + half_h - SAMPLE_SINK_M, half_w, half_h, math.cos(yaw),
+                         math.sin(yaw), scale))
+        return np.array(rows, np.float64).reshape(-1, 8)
+
+
+@njit(cache=True, nogil=True)
+def _draw_samples_kernel(img, depth, rot, origin, ray_a, ray_b, params, sun, min_shade, far_m,
+                         focal, cx, cy):
+    """Ray-ellipsoid intersection per pixel of each sample's screen box, with a depth test."""
+    h_img, w_img = depth.shape
+    for i in range(params.shape[0]):
+        px, py, pz, half_w, half_h, c, s = (params[i, 0], params[i, 1], params[i, 2], params[i, 3],
+                                            params[i, 4], params[i, 5], params[i, 6])
+        rx, ry, rz = px - origin[0], py - origin[1], pz - origin[2]
+        cam_x = rot[0, 0] * rx + rot[1, 0] * ry + rot[2, 0] * rz  # right
+        cam_y = rot[0, 1] * rx + rot[1, 1] * ry + rot[2, 1] * rz  # up
+        cam_z = rot[0, 2] * rx + rot[1, 2] * ry + rot[2, 2] * rz  # forward
         radius = max(half_w, half_h) * 1.1
-        if cam[2] <= 0.05 or np.linalg.norm(rel) > FAR_M:
-            return
-        u_c = CX + FOCAL_PX * cam[0] / cam[2]
-        v_c = CY - FOCAL_PX * cam[1] / cam[2]
-        r_px = FOCAL_PX * radius / max(cam[2] - radius, 0.05) + 2
-        u0, u1 = int(max(0, u_c - r_px)), int(min(IMAGE_W, u_c + r_px + 1))
-        v0, v1 = int(max(0, v_c - r_px)), int(min(IMAGE_H, v_c + r_px + 1))
+        if cam_z <= 0.05 or math.sqrt(rx * rx + ry * ry + rz * rz) > far_m:
+            continue
+        u_c = cx + focal * cam_x / cam_z
+        v_c = cy - focal * cam_y / cam_z
+        r_px = focal * radius / max(cam_z - radius, 0.05) + 2
+        u0 = int(max(0.0, u_c - r_px))
+        u1 = int(min(float(w_img), u_c + r_px + 1))
+        v0 = int(max(0.0, v_c - r_px))
+        v1 = int(min(float(h_img), v_c + r_px + 1))
         if u0 >= u1 or v0 >= v1:
-            return
-        uu, vv = np.meshgrid(self._ray_a[u0:u1], self._ray_b[v0:v1])
-        dirs = (rot[:, 0][None, None] * uu[..., None] + rot[:, 1][None, None] * vv[..., None]
-                + rot[:, 2][None, None])  # world ray directions (forward component 1)
-        c, s = math.cos(math.radians(syaw)), math.sin(math.radians(syaw))
+            continue
         # ellipsoid frame: rotate by yaw, scale to the unit sphere (slightly oblong)
-        axes = np.array([half_w * 1.08, half_w * 0.92, half_h])
-        basis = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        o_l = (basis @ (origin - centre)) / axes
-        d_l = (dirs @ basis.T) / axes
-        qa = np.einsum("ijk,ijk->ij", d_l, d_l)
-        qb = 2.0 * (d_l @ o_l)
-        qc = float(o_l @ o_l) - 1.0
-        disc = qb * qb - 4 * qa * qc
-        hit = disc > 0
-        t = np.where(hit, (-qb - np.sqrt(np.maximum(disc, 0))) / (2 * qa), np.inf)
-        hit &= (t > 0) & (t < depth[v0:v1, u0:u1])
-        if not hit.any():
-            return
-        p_l = o_l[None] + t[hit][:, None] * d_l[hit]
-        normal_w = (p_l / axes) @ basis  # gradient of the ellipsoid, back in world axes
-        normal_w /= np.linalg.norm(normal_w, axis=-1, keepdims=True) + 1e-12
-        az, el = math.radians(SUN_AZIMUTH_DEG), math.radians(SUN_ELEVATION_DEG)
-        sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-        lam = np.clip(normal_w @ sun, 0.0, 1.0)
-        shade = SAMPLE_MIN_SHADE + (1.0 - SAMPLE_MIN_SHADE) * lam
-        rgb = np.clip(np.array(SAMPLE_RGB)[None] * shade[:, None] * 255.0, 0, 255)
-        patch = img[v0:v1, u0:u1]
-        patch[hit] = rgb.astype(np.uint8)
-        depth[v0:v1, u0:u1][hit] = t[hit]
+        ax, ay, az = half_w * 1.08, half_w * 0.92, half_h
+        ex, ey, ez = origin[0] - px, origin[1] - py, origin[2] - pz
+        ol_x = (c * ex + s * ey) / ax
+        ol_y = (-s * ex + c * ey) / ay
+        ol_z = ez / az
+        qc = ol_x * ol_x + ol_y * ol_y + ol_z * ol_z - 1.0
+        for v in range(v0, v1):
+            bv = ray_b[v]
+            for u in range(u0, u1):
+                au = ray_a[u]
+                # world ray direction (forward component 1)
+                dx = rot[0, 0] * au + rot[0, 1] * bv + rot[0, 2]
+                dy = rot[1, 0] * au + rot[1, 1] * bv + rot[1, 2]
+                dz = rot[2, 0] * au + rot[2, 1] * bv + rot[2, 2]
+                dl_x = (c * dx + s * dy) / ax
+                dl_y = (-s * dx + c * dy) / ay
+                dl_z = dz / az
+                qa = dl_x * dl_x + dl_y * dl_y + dl_z * dl_z
+                qb = 2.0 * (dl_x * ol_x + dl_y * ol_y + dl_z * ol_z)
+                disc = qb * qb - 4.0 * qa * qc
+                if disc <= 0.0:
+                    continue
+                t = (-qb - math.sqrt(disc)) / (2.0 * qa)
+                if not (t > 0.0 and t < depth[v, u]):
+                    continue
+                # gradient of the ellipsoid at the hit, back in world axes
+                pl_x = (ol_x + t * dl_x) / ax
+                pl_y = (ol_y + t * dl_y) / ay
+                pl_z = (ol_z + t * dl_z) / az
+                nx = c * pl_x - s * pl_y
+                ny = s * pl_x + c * pl_y
+                nz = pl_z
+                norm = math.sqrt(nx * nx + ny * ny + nz * nz) + 1e-12
+                lam = (nx * sun[0] + ny * sun[1] + nz * sun[2]) / norm
+                lam = min(max(lam, 0.0), 1.0)
+                shade = min_shade + (1.0 - min_shade) * lam
+                for ch in range(3):
+                    img[v, u, ch] = np.uint8(min(max(SAMPLE_RGB_255[ch] * shade, 0.0), 255.0))
+                depth[v, u] = t
