@@ -1,35 +1,43 @@
 """Does a map built from twin frames score like one built from the real frames?
 
-A real recorded drive is replayed twice through the client's perception: once with
-its own camera frames, once with twin frames rendered at the same logged poses.
-The two worldmaps are scored against map_bw.png. Per-frame IoU (sim.realism) only
-covers the start area; this covers the whole canyon, where the edge cells decide
-the mapped figure, and it is how the missing shadows of some recordings showed up.
+A simulator log is replayed through the client's perception twice: once with its own camera
+frames, once with twin frames rendered at the same logged poses.  The two worldmaps are
+scored against map_bw.png, and compared with each other (map IoU: cells the two maps mark
+navigable).  Each figure is given over all frames and over the frames where the rover moves
+(keys with `moving` in metrics.json), per shadows setting; `places.png` shows the worst
+places side by side (real map | twin map | disagreement) and metrics.json lists them.
 
-    python -m sim.map_realism [--log megalphian] [--stride 2] [--shadows on|off] [--out out/map-realism]
+    python -m sim.map_realism [--log megalphian|test_dataset|PATH] [--stride 2]
+                              [--shadows off|on|both] [--out out/map-realism]
 """
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import cv2
+import numpy as np
+
 import perception
 import shared_data
 from evaluation.metrics import load_ground_truth, score_map
-from replay.log_format import LogFormatError, read_log, resolve_log_path
+from replay.log_format import read_log
 from replay.runner import FALLBACK_FRAME_PERIOD_S, apply_frame, decode_frame, signed_angle
 from rover_state import RoverState
-from sim.cli import add_shadows_option, parse_with_logging
+from sim.cli import parse_with_logging
 from sim.render import Renderer
-from sim.realism import jpeg_roundtrip
+from sim.logs import find_log  # noqa: F401  (the rule for NAME|PATH, re-exported)
+from sim.realism import MOVING_MIN_SPEED, jpeg_roundtrip
 
 log = logging.getLogger(__name__)
 
 DEFAULT_LOG = "megalphian"  # folder under ../shared/real-logs (or a path to a log folder)
 DEFAULT_STRIDE = 2  # every N-th frame is used (both replays see the same frames)
+PLACE_CELLS = 10  # side of a "place" when ranking disagreement, map cells (m)
+WORST_PLACES = 5  # places listed in metrics.json and framed in places.png
+PLACES_SCALE = 3  # places.png pixels per map cell
 
 
 @dataclass
@@ -40,6 +48,13 @@ class MapRealism:
     twin_mapped_pct: float
     twin_fidelity_pct: float
     shadows: str
+    map_iou: float = float("nan")  # navigable cells of the twin-frame map vs the real-frame map
+    moving_frames: int = 0
+    real_moving_mapped_pct: float = float("nan")
+    real_moving_fidelity_pct: float = float("nan")
+    twin_moving_mapped_pct: float = float("nan")
+    twin_moving_fidelity_pct: float = float("nan")
+    map_iou_moving: float = float("nan")
 
     @property
     def mapped_gap(self) -> float:
@@ -47,34 +62,33 @@ class MapRealism:
         return self.twin_mapped_pct - self.real_mapped_pct
 
 
-def find_log(name_or_path) -> Path:
-    """The robot_log.csv of a real-logs folder name, a log folder or a csv path (read_log's rule)."""
-    p = Path(name_or_path)
-    if not p.exists():
-        p = shared_data.real_logs_dir() / str(name_or_path)
-    try:
-        return resolve_log_path(p)
-    except LogFormatError as exc:
-        raise FileNotFoundError(f"{exc} (real logs are looked up in {shared_data.real_logs_dir()})") from None
+def map_iou(a, b) -> float:
+    """IoU of the cells two worldmaps mark navigable (1 when both are empty)."""
+    na, nb = a[:, :, 2] > 0, b[:, :, 2] > 0
+    union = int(np.count_nonzero(na | nb))
+    return 1.0 if union == 0 else int(np.count_nonzero(na & nb)) / union
 
 
-def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = False, truth=None):
+def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = False, truth=None, maps=None,
+            moving: bool = True):
     """Replay real and twin frames of one log; returns (MapRealism, real worldmap, twin worldmap).
 
     truth: map_bw as load_ground_truth gives it (read from ../shared when None).
+    maps: a dict to receive the moving-frames worldmaps too ("real_moving", "twin_moving").
+    moving: also replay the moving frames alone (costs a second perception pass on them).
     """
     data = read_log(log_path)
     if truth is None:
         truth = load_ground_truth(shared_data.ground_truth_map_path())
     renderer = Renderer(world)
-    real_rover, twin_rover = RoverState(), RoverState()
+    rovers = {k: RoverState() for k in ("real", "twin", "real_moving", "twin_moving")}
     frames = data.frames[:: max(1, int(stride))]
     it = frames
     if progress:
         from tqdm import tqdm
 
         it = tqdm(frames, desc="map realism", unit="frame")
-    used = 0
+    used = moving_used = 0
     for i, frame in enumerate(it):
         real = decode_frame(frame.image_path)
         if real is None:
@@ -82,25 +96,80 @@ def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = Fals
         pose = (frame.x, frame.y, frame.yaw, signed_angle(frame.pitch), signed_angle(frame.roll))
         twin = jpeg_roundtrip(renderer.render(pose))
         now = i * FALLBACK_FRAME_PERIOD_S
-        for rover, rgb in ((real_rover, real), (twin_rover, twin)):
-            apply_frame(rover, frame, rgb, now)
-            perception.perception_step(rover)
+        is_moving = moving and abs(frame.speed) >= MOVING_MIN_SPEED
+        for key, rgb in (("real", real), ("twin", twin)):
+            for name in (key, f"{key}_moving") if is_moving else (key,):
+                apply_frame(rovers[name], frame, rgb, now)
+                perception.perception_step(rovers[name])
         used += 1
+        moving_used += is_moving
     if used == 0:
         raise ValueError(f"no readable frames in {log_path}")
-    real_score = score_map(real_rover.worldmap, truth)
-    twin_score = score_map(twin_rover.worldmap, truth)
-    result = MapRealism(used, real_score.mapped_pct, real_score.fidelity_pct, twin_score.mapped_pct,
-                        twin_score.fidelity_pct, "on" if world.cast_shadows else "off")
-    return result, real_rover.worldmap, twin_rover.worldmap
+    score = {k: score_map(r.worldmap, truth) for k, r in rovers.items()}
+    result = MapRealism(
+        used, score["real"].mapped_pct, score["real"].fidelity_pct, score["twin"].mapped_pct,
+        score["twin"].fidelity_pct, "on" if world.cast_shadows else "off",
+        map_iou=map_iou(rovers["real"].worldmap, rovers["twin"].worldmap), moving_frames=moving_used,
+        real_moving_mapped_pct=score["real_moving"].mapped_pct,
+        real_moving_fidelity_pct=score["real_moving"].fidelity_pct,
+        twin_moving_mapped_pct=score["twin_moving"].mapped_pct,
+        twin_moving_fidelity_pct=score["twin_moving"].fidelity_pct,
+        map_iou_moving=map_iou(rovers["real_moving"].worldmap, rovers["twin_moving"].worldmap))
+    if maps is not None:
+        maps["real_moving"] = rovers["real_moving"].worldmap
+        maps["twin_moving"] = rovers["twin_moving"].worldmap
+    return result, rovers["real"].worldmap, rovers["twin"].worldmap
+
+
+def worst_places(real_map, twin_map, count: int = WORST_PLACES) -> list:
+    """PLACE_CELLS squares where the two maps disagree most: dicts with x, y (centre, m) and cells."""
+    diff = ((real_map[:, :, 2] > 0) != (twin_map[:, :, 2] > 0)).astype(np.int32)
+    n = diff.shape[0] // PLACE_CELLS
+    blocks = diff[: n * PLACE_CELLS, : n * PLACE_CELLS].reshape(n, PLACE_CELLS, n, PLACE_CELLS).sum(axis=(1, 3))
+    out = []
+    for flat in np.argsort(blocks, axis=None)[::-1][:count]:
+        r, c = divmod(int(flat), n)
+        if blocks[r, c] == 0:
+            break
+        out.append({"x": (c + 0.5) * PLACE_CELLS, "y": (r + 0.5) * PLACE_CELLS, "disagreeing_cells": int(blocks[r, c])})
+    return out
+
+
+def places_image(real_map, twin_map, truth, places, title: str) -> np.ndarray:
+    """BGR: real map | twin map | disagreement (orange real only, cyan twin only), north up, worst places framed."""
+    from replay.outputs import map_image
+
+    real_nav, twin_nav = real_map[:, :, 2] > 0, twin_map[:, :, 2] > 0
+    diff = np.zeros(real_map.shape, np.uint8)
+    diff[(truth > 0)] = (60, 60, 60)
+    diff[real_nav & twin_nav] = (200, 200, 200)
+    diff[real_nav & ~twin_nav] = (0, 140, 255)
+    diff[~real_nav & twin_nav] = (255, 255, 0)
+    diff = np.flipud(diff)
+    panels = []
+    for img in (map_image(real_map, truth), map_image(twin_map, truth), diff):
+        img = img[: img.shape[1]]  # the square map, without map_image's legend
+        img = cv2.resize(np.ascontiguousarray(img), (diff.shape[1] * PLACES_SCALE, diff.shape[0] * PLACES_SCALE),
+                         interpolation=cv2.INTER_NEAREST)
+        for p in places:
+            x0 = int((p["x"] - PLACE_CELLS / 2) * PLACES_SCALE)
+            y0 = int((diff.shape[0] - p["y"] - PLACE_CELLS / 2) * PLACES_SCALE)
+            cv2.rectangle(img, (x0, y0), (x0 + PLACE_CELLS * PLACES_SCALE, y0 + PLACE_CELLS * PLACES_SCALE),
+                          (0, 0, 255), 1)
+        panels.append(img)
+    out = np.hstack(panels)
+    bar = np.zeros((20, out.shape[1], 3), np.uint8)
+    cv2.putText(bar, title, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
+    return np.vstack([bar, out])
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--log", default=DEFAULT_LOG, help="real-logs folder name, a log folder or a robot_log.csv")
+    p.add_argument("--log", default=DEFAULT_LOG, help="test_dataset, a real-logs folder name, a log folder or csv")
     p.add_argument("--stride", type=int, default=DEFAULT_STRIDE, help="use every N-th frame")
-    p.add_argument("--out", default="out/map-realism", help="folder for metrics.json and the two scored map images")
-    add_shadows_option(p)
+    p.add_argument("--out", default="out/map-realism", help="folder for metrics.json and the map images")
+    p.add_argument("--shadows", choices=("off", "on", "both"), default="off",
+                   help="twin cast shadows: off (default, as most real drives), on (as test_dataset) or both")
     a = parse_with_logging(p, argv)
     if a.stride < 1:
         p.error("--stride must be at least 1")
@@ -109,27 +178,52 @@ def main(argv=None) -> int:
     if not real_world_available() or not shared_data.ground_truth_map_path().exists():
         log.error("the real world and map_bw.png are needed (set %s)", shared_data.SHARED_ENV_VAR)
         return 2
+    from replay.outputs import map_image, write_json, write_png
+
+    out = Path(a.out)
+    settings = ("off", "on") if a.shadows == "both" else (a.shadows,)
+    payload = {"stride": a.stride, "moving_min_speed_m_s": MOVING_MIN_SPEED}
     try:
         log_path = find_log(a.log)
-        world = with_shadows(load_real_world(), a.shadows == "on")
+        payload["log"] = str(log_path)
+        world = load_real_world()
         truth = load_ground_truth(shared_data.ground_truth_map_path())
-        result, real_map, twin_map = compare(log_path, world, a.stride, progress=True, truth=truth)
+        results = {}
+        for setting in settings:
+            maps = {}
+            result, real_map, twin_map = compare(log_path, with_shadows(world, setting == "on"), a.stride,
+                                                 progress=True, truth=truth, maps=maps)
+            results[setting] = result
+            places = worst_places(real_map, twin_map)
+            payload[f"shadows_{setting}"] = {**asdict(result), "mapped_gap": result.mapped_gap,
+                                             "moving_mapped_gap": result.twin_moving_mapped_pct
+                                             - result.real_moving_mapped_pct,
+                                             "worst_places": places}
+            title = (f"{log_path.parent.name}, shadows {setting}: real {result.real_mapped_pct:.1f}/"
+                     f"{result.real_fidelity_pct:.1f}  twin {result.twin_mapped_pct:.1f}/{result.twin_fidelity_pct:.1f}"
+                     f"  map IoU {result.map_iou:.3f}  (real | twin | orange real only, cyan twin only)")
+            write_png(out / f"places_shadows_{setting}.png", places_image(real_map, twin_map, truth, places, title))
+            for name, worldmap, mapped, fidelity in (
+                    ("real", real_map, result.real_mapped_pct, result.real_fidelity_pct),
+                    ("twin", twin_map, result.twin_mapped_pct, result.twin_fidelity_pct)):
+                lines = [f"{name} frames, shadows {setting}", f"{mapped:.1f}% mapped {fidelity:.1f}% fidelity"]
+                write_png(out / f"{name}_map_shadows_{setting}.png", map_image(worldmap, truth, title_lines=lines))
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
-    out = Path(a.out)
-    from replay.outputs import map_image, write_json, write_png
-
-    write_json(out / "metrics.json", {**asdict(result), "log": str(log_path), "stride": a.stride})
-    for name, worldmap, mapped, fidelity in (("real", real_map, result.real_mapped_pct, result.real_fidelity_pct),
-                                             ("twin", twin_map, result.twin_mapped_pct, result.twin_fidelity_pct)):
-        title = [f"{name} frames, shadows {result.shadows}", f"{mapped:.1f}% mapped {fidelity:.1f}% fidelity"]
-        write_png(out / f"{name}_map.png", map_image(worldmap, truth, title_lines=title))
-    log.info("%s, %d frames, shadows %s", log_path, result.frames, result.shadows)
-    log.info("  real frames: %.1f %% mapped, %.1f %% fidelity", result.real_mapped_pct, result.real_fidelity_pct)
-    log.info("  twin frames: %.1f %% mapped, %.1f %% fidelity (mapped gap %+.1f points)",
-             result.twin_mapped_pct, result.twin_fidelity_pct, result.mapped_gap)
-    log.info("  metrics.json and worldmaps in %s", out)
+    write_json(out / "metrics.json", payload)
+    print(f"map realism of {log_path}, every {a.stride}. frame (mapped / fidelity %, twin minus real in points)")
+    print(f"{'shadows':<8} {'frames':>13} {'real all':>12} {'twin all':>12} {'gap':>11} {'IoU':>6}"
+          f" {'real moving':>12} {'twin moving':>12} {'gap moving':>11} {'IoU mov':>7}")
+    for setting, r in results.items():
+        print(f"{setting:<8} {r.frames:>6}/{r.moving_frames:<6} {r.real_mapped_pct:>5.1f}/{r.real_fidelity_pct:<5.1f} "
+              f"{r.twin_mapped_pct:>5.1f}/{r.twin_fidelity_pct:<5.1f} {r.mapped_gap:>+5.1f}/"
+              f"{r.twin_fidelity_pct - r.real_fidelity_pct:<+5.1f} {r.map_iou:>6.3f} "
+              f"{r.real_moving_mapped_pct:>5.1f}/{r.real_moving_fidelity_pct:<5.1f} "
+              f"{r.twin_moving_mapped_pct:>5.1f}/{r.twin_moving_fidelity_pct:<5.1f} "
+              f"{r.twin_moving_mapped_pct - r.real_moving_mapped_pct:>+5.1f}/"
+              f"{r.twin_moving_fidelity_pct - r.real_moving_fidelity_pct:<+5.1f} {r.map_iou_moving:>7.3f}")
+    print(f"metrics.json, maps and places images in {out}")
     return 0
 
 

@@ -13,7 +13,6 @@ NAME may be a folder under ../shared/real-logs, `test_dataset`, or a path to a l
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import re
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ import numpy as np
 
 import shared_data
 from sim import physics as P
+from sim.logs import find_log
 
 log = logging.getLogger(__name__)
 
@@ -46,19 +46,6 @@ class WindowResult:
     twin_collided: bool  # the twin touched something during the window
     twin_min_pitch: float  # deg, most nose-up twin pitch during the window
     real_min_pitch: float  # deg, most nose-up logged pitch during the window
-
-
-def find_log(name_or_path) -> Path:
-    """robot_log.csv of a real-logs folder name, `test_dataset`, a log folder or a csv."""
-    from replay.log_format import resolve_log_path
-
-    p = Path(name_or_path)
-    if not p.exists():
-        if str(name_or_path) == "test_dataset":
-            p = shared_data.test_dataset_dir()
-        else:
-            p = shared_data.real_logs_dir() / str(name_or_path)
-    return resolve_log_path(p)
 
 
 def log_arrays(log_path) -> dict:

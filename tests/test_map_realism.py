@@ -33,7 +33,7 @@ def real_world(world_dir):
 def test_twin_without_shadows_maps_like_the_real_frames(megalphian, real_world):
     from sim.world import with_shadows
 
-    r, real_map, twin_map = map_realism.compare(megalphian, with_shadows(real_world, False), STRIDE)
+    r, real_map, twin_map = map_realism.compare(megalphian, with_shadows(real_world, False), STRIDE, moving=False)
     assert r.frames > 900
     assert r.real_mapped_pct > 90  # the recording itself maps well (replay target of issue 3)
     assert abs(r.mapped_gap) <= MAX_GAP_SHADOWS_OFF, r
@@ -44,7 +44,7 @@ def test_twin_without_shadows_maps_like_the_real_frames(megalphian, real_world):
 def test_shadowed_sand_rule_maps_the_shadowed_twin_like_the_real_frames(megalphian, real_world):
     from sim.world import with_shadows
 
-    on, _, _ = map_realism.compare(megalphian, with_shadows(real_world, True), STRIDE)
+    on, _, _ = map_realism.compare(megalphian, with_shadows(real_world, True), STRIDE, moving=False)
     assert on.shadows == "on"
     # before the one-row texture window and the shadowed-sand majority this gap was -5.5 points
     assert on.mapped_gap >= -MAX_GAP_SHADOWS_OFF, on
@@ -56,3 +56,19 @@ def test_find_log_errors_clearly(tmp_path):
         map_realism.find_log(tmp_path / "nope")
     with pytest.raises(FileNotFoundError):
         map_realism.find_log(tmp_path)  # a folder without a csv
+
+
+def test_cli_on_test_dataset_reports_moving_frames_per_shadows_setting(tmp_path, test_dataset_dir, ground_truth_path,
+                                                                        world_dir):
+    """Any log by name; all-frames and moving-frames figures for both settings; the worst places drawn."""
+    import json
+
+    assert map_realism.main(["--log", "test_dataset", "--stride", "20", "--shadows", "both",
+                             "--out", str(tmp_path)]) == 0
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    for setting in ("off", "on"):
+        r = m[f"shadows_{setting}"]
+        assert r["shadows"] == setting and r["frames"] >= 14
+        assert 0 < r["moving_frames"] <= r["frames"]
+        assert any("moving" in k for k in r) and 0.5 < r["map_iou_moving"] <= 1.0
+        assert r["worst_places"] and (tmp_path / f"places_shadows_{setting}.png").exists()

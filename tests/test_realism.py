@@ -55,3 +55,40 @@ def test_near_iou_floor(figures):
 
 def test_whole_view_iou_floor(figures):
     assert figures["whole_view_mean"] >= realism.FLOOR_WHOLE_MEAN, figures
+
+
+def test_any_log_reads_with_speed(real_logs_dir):
+    """dimaga: CR-only line ends and corrupt rows; frames carry the logged speed for the moving split."""
+    frames = realism.read_frames(real_logs_dir / "dimaga" / "robot_log.csv")
+    assert len(frames) > 1000
+    assert any(f.moving for f in frames) and not all(f.moving for f in frames)
+
+
+def test_summary_splits_moving_frames():
+    near = np.array([0.5, 1.0, 1.0, 0.9])
+    whole = np.array([0.4, 0.8, 0.8, 0.7])
+    s = realism.summarise(near, whole, [False, True, True, True])
+    assert s["moving_frames"] == 3
+    assert s["near_5m_moving_mean"] == pytest.approx(2.9 / 3) and s["near_5m_mean"] == pytest.approx(0.85)
+    assert s["whole_view_moving_mean"] == pytest.approx(0.7667, abs=1e-3)
+
+
+def test_worst_places_are_apart_and_moving():
+    frames = [realism.LoggedFrame(None, (x, 0.0, 0.0, 0.0, 0.0), speed) for x, speed in
+              [(0.0, 1.0), (1.0, 1.0), (10.0, 1.0), (20.0, 0.0)]]
+    near = np.array([0.1, 0.2, 0.5, 0.0])  # the standing frame is the worst but not a moving one
+    assert realism.worst_places(frames, near, 3) == [0, 2]
+
+
+def test_cli_reports_both_shadow_settings(tmp_path, test_dataset_dir, world_dir):
+    import json
+
+    realism.main(["--log", "test_dataset", "--stride", "25", "--shadows", "both", "--examples", "2",
+                  "--out", str(tmp_path)])
+    m = json.loads((tmp_path / "metrics.json").read_text())
+    for setting in ("off", "on"):
+        r = m[f"shadows_{setting}"]
+        assert r["frames"] >= 11 and 0 < r["moving_frames"] <= r["frames"]
+        assert 0.0 <= r["near_5m_moving_mean"] <= 1.0 and 0.0 <= r["whole_view_moving_mean"] <= 1.0
+        assert len(r["worst_places"]) == 2
+        assert (tmp_path / r["worst_places"][0]["image"]).exists()
