@@ -38,7 +38,7 @@ PING_INTERVAL_S = 25  # Engine.IO ping interval announced in the handshake, s
 PING_TIMEOUT_S = 60  # Engine.IO ping timeout, s
 SIMULATOR_TRANSPORT = "websocket"  # the simulator opens a websocket directly (no polling)
 COMMAND_KEYS = ("throttle", "brake", "steering_angle")  # the part of a data reply repeated for stale frames
-READER_SLICE_S = 0.02  # the reader lets the worker run at least this often during a flood, s
+READER_SLICE_S = 0.1  # during a flood the reader reads at most this long before the worker runs, s
 
 Reply = Tuple[str, Dict[str, str]]
 

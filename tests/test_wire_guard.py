@@ -14,6 +14,7 @@ import autonomy
 import drive_rover
 import safe_write
 import wire_guard
+import wire_server
 from autonomy import AutonomyClient
 from replay.log_format import LogWriter, read_log
 from tests.test_parsing import telemetry
@@ -405,7 +406,8 @@ def test_a_flooding_reader_steps_aside_for_the_worker():
                       pause=lambda: pauses.append(1), clock=StepClock())
     for i in range(100):
         session.on_message(_frame(i))
-    assert 20 <= len(pauses) <= 30  # every ~20 ms of reading, not every frame
+    expected = 100 * 0.005 / wire_server.READER_SLICE_S  # once per slice of reading, not every frame
+    assert expected - 2 <= len(pauses) <= expected + 2
 
 
 def test_ignore_reasons_do_not_grow_with_invented_names():

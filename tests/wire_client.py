@@ -19,6 +19,7 @@ RECV_TIMEOUT_S = 20.0  # wait for one reply, s
 QUIET_S = 0.5  # silence that proves "no extra reply", s
 CONNECT_RETRY_S = 10.0  # keep retrying a refused (401) connection this long, s
 RECONNECT_DELAY_S = 0.005  # the simulator's reconnect period, s
+PING_EVERY_S = 10.0  # ping period while receiving (engineio drops a client silent for 25 + 5 s), s
 
 
 def free_port():
@@ -105,6 +106,7 @@ class FakeSimulator:
         assert opening.startswith("0{"), opening
         self.handshake = json.loads(opening[1:])
         self.pongs = 0
+        self._last_ping = time.monotonic()
 
     def send_telemetry(self, data):
         self.ws.send("42" + json.dumps(["telemetry", data]))
@@ -117,7 +119,15 @@ class FakeSimulator:
         """Next event (name, payload); answers pings and skips 40/3 as the sim does."""
         deadline = time.monotonic() + timeout
         while True:
-            frame = self.recv_frame(max(0.01, deadline - time.monotonic()))
+            if time.monotonic() - self._last_ping > PING_EVERY_S:  # as the simulator does (every 25 s)
+                self.ws.send("2")
+                self._last_ping = time.monotonic()
+            try:
+                frame = self.recv_frame(max(0.01, min(PING_EVERY_S, deadline - time.monotonic())))
+            except websocket.WebSocketTimeoutException:
+                if time.monotonic() >= deadline:
+                    raise
+                continue
             if frame == "2":
                 self.ws.send("3")
             elif frame == "3":
