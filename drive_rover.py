@@ -11,9 +11,12 @@ and a wrong install exits with the fix spelled out.
 Each ``telemetry`` gets exactly one reply from ``AutonomyClient`` (``data``,
 ``pickup`` or ``manual``): the simulator answers every command with one new
 telemetry, so more than one reply would multiply the chains and none would
-stall it.  Recording (optional folder argument) writes a simulator-format
-``robot_log.csv`` + ``IMG/`` from a background thread and never deletes
-anything.
+stall it.  The sessions (one simulator at a time, the newest frame handled
+during a flood) are in ``wire_server.py``, the per-frame rules (what is
+ignored, the Host check) in ``wire_guard.py``; docs/wire-hardening.md.
+Recording (optional folder argument) writes a simulator-format
+``robot_log.csv`` + ``IMG/`` from a background thread, never deletes
+anything, and leaves no temp file when a write fails (``safe_write.py``).
 
 Usage: ``python drive_rover.py [image_folder] [--host 127.0.0.1] [--port 4567]
 [--ground-truth PATH|none] [--save-map PATH.npy] [--log-level INFO]``

@@ -18,6 +18,7 @@ import argparse
 import collections
 import json
 import logging
+import signal
 import subprocess
 import sys
 import time
@@ -164,6 +165,11 @@ def soak(frames_total: int, chains: int, every: int, log_path=None, server_log_p
     return dict(sent=sent, replies=replies, lost=lost, rss=rss_reports, latencies=latencies)
 
 
+def _interrupt(signum, frame):
+    """SIGTERM behaves as Ctrl-C, so the finally block stops the server we started."""
+    raise KeyboardInterrupt
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--frames", type=int, default=REPORT_EVERY * 2, help="telemetry frames to send")
@@ -172,6 +178,7 @@ def main(argv=None):
     p.add_argument("--log", default=None, help="simulator log folder (default: shared test_dataset)")
     p.add_argument("--server-log", default=None, help="write drive_rover.py's output here")
     args = p.parse_args(argv)
+    signal.signal(signal.SIGTERM, _interrupt)
     if args.frames < 1 or args.chains < 1 or args.every < 1:
         p.error("--frames, --chains and --every must be positive")
     logging.basicConfig(level=logging.INFO, format="%(message)s")

@@ -211,6 +211,11 @@ def test_foreign_host_header_is_refused_on_websocket_and_http(server, host):
         urllib.request.urlopen(request, timeout=10)
     assert http.value.code == 403
     assert "DNS-rebinding guard" in server.output()
+    sim = FakeSimulator(server.port)  # the simulator itself is still served
+    try:
+        assert_answers_valid_telemetry(sim)
+    finally:
+        sim.close()
 
 
 @pytest.mark.parametrize("host", ["localhost", "[::1]", "127.0.0.1"])
