@@ -33,6 +33,7 @@ import re
 import signal
 import sys
 import threading
+import time
 import warnings
 from importlib import metadata
 from pathlib import Path
@@ -49,6 +50,7 @@ RECORD_QUEUE_FRAMES = 256  # frames buffered for the recorder thread before drop
 RECORD_JOIN_TIMEOUT_S = 10.0  # time allowed to flush the recorder at exit, s
 RECORD_ERRORS_LOGGED = 3  # recorder write errors logged in full before only every RECORD_ERROR_LOG_EVERY-th
 RECORD_ERROR_LOG_EVERY = 1000  # then one log line per this many failed frames, frames
+STATUS_TICK_S = 1.0  # s between checks of the link status (lines are rarer: link_status.py)
 SAVE_MAP_EVERY_FRAMES = 100  # --save-map: telemetry frames between worldmap dumps (plus one at exit), frames
 
 
@@ -239,19 +241,32 @@ def load_ground_truth_arg(value):
     try:
         truth = load_ground_truth(path)
     except ValueError as exc:
-        sys.exit(f"--ground-truth: {exc}")
+        _usage_error(f"--ground-truth: {exc}")
     log.info("ground truth: %s (%d navigable cells)", path, int((truth > 0).sum()))
     return truth
 
 
-def parse_args(argv=None):
-    p = argparse.ArgumentParser(description="Autonomy client for the Udacity RoboND rover simulator "
-                                            "(start this first, then the simulator in Autonomous mode).")
+PROG = "python drive_rover.py"  # how help and errors name this tool
+
+
+def _usage_error(message: str):
+    """One line naming the option, exit status 2 (as argparse does for a bad option)."""
+    from sim.cli import USAGE_EXIT
+
+    sys.stderr.write(f"{PROG}: error: {message}\n")
+    sys.exit(USAGE_EXIT)
+
+
+def build_parser():
+    from sim.cli import port_number, tool_parser
+
+    p = tool_parser(PROG, "Autonomy client for the Udacity RoboND rover simulator "
+                          "(start this first, then the simulator in Autonomous mode).")
     p.add_argument("image_folder", nargs="?", default=None,
                    help="record a simulator-format log (robot_log.csv + IMG/) here; "
                         "a non-empty folder gets a new timestamped subfolder")
     p.add_argument("--host", default=DEFAULT_HOST, help="address to bind (default %(default)s)")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT,
+    p.add_argument("--port", type=port_number, default=DEFAULT_PORT,
                    help="port to bind (default %(default)s, the simulator's; 0 = any free port)")
     p.add_argument("--ground-truth", default=None,
                    help="map_bw.png for the Mapped/Fidelity inset (default: the shared one if present; 'none' to disable)")
@@ -262,8 +277,71 @@ def parse_args(argv=None):
     from dashboard import add_dashboard_options
 
     add_dashboard_options(p)
-    p.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING, ... (default %(default)s)")
-    return p.parse_args(argv)
+    from sim.cli import add_log_level_option
+
+    add_log_level_option(p)
+    return p
+
+
+def parse_args(argv=None):
+    return build_parser().parse_args(argv)
+
+
+def check_args(args):
+    """Every option that can be wrong, checked before any work starts: one line, exit 2.
+    Returns the MapSaver for --save-map (or None)."""
+    from dashboard.server import port_problem
+    from sim.cli import file_problem, folder_problem
+
+    if args.image_folder:
+        problem = folder_problem(args.image_folder)
+        if problem:
+            _usage_error(f"image_folder: {problem}")
+    map_saver = None
+    if args.save_map:
+        try:
+            map_saver = MapSaver(args.save_map)
+        except ValueError as exc:
+            _usage_error(f"--save-map: {exc}")
+        problem = file_problem(args.save_map)
+        if problem:
+            _usage_error(f"--save-map: {problem}")
+    if args.port:
+        problem = port_problem(args.host, args.port)
+        if problem:
+            _usage_error(f"--port: {problem} (another drive_rover.py? stop it or pick another --port)")
+    if args.dashboard and args.dashboard_port:
+        if args.dashboard_port == args.port:
+            _usage_error(f"--dashboard-port: {args.dashboard_port} is the simulator's --port")
+        problem = port_problem(DEFAULT_HOST, args.dashboard_port)
+        if problem:
+            _usage_error(f"--dashboard-port: {problem}")
+    return map_saver
+
+
+class FrameObservers:
+    """Everything that hears of a handled frame: the link status (always) and the dashboard (optional)."""
+
+    def __init__(self, status, dashboard=None):
+        self.status, self.dashboard = status, dashboard
+
+    def observe(self, client, event=None, force=False):
+        self.status.on_telemetry(time.monotonic(), client.last_timings.get("total", float("nan")))
+        if self.dashboard is not None:
+            self.dashboard.observe(client, event, force)
+
+
+def _report_status(status, client):
+    """Green thread: log the link's status lines (see link_status.py) about once a second."""
+    import eventlet
+
+    while True:
+        eventlet.sleep(STATUS_TICK_S)
+        try:
+            for level, message in status.tick(time.monotonic(), client.rover):
+                log.log(level, "%s", message)
+        except Exception:  # the status line must never take the server down
+            log.exception("status line failed")
 
 
 def add_home_by_option(parser: argparse.ArgumentParser):
@@ -289,13 +367,10 @@ def positive_seconds(text):
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.INFO),
+    logging.basicConfig(level=getattr(logging, args.log_level, logging.INFO),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     require_compatible_versions()
-    try:
-        map_saver = MapSaver(args.save_map) if args.save_map else None
-    except ValueError as exc:
-        sys.exit(f"--save-map: {exc}")
+    map_saver = check_args(args)
     warnings.filterwarnings("ignore", message=r"\s*Eventlet is deprecated")  # documented in README
     import eventlet
     import eventlet.wsgi
@@ -303,15 +378,15 @@ def main(argv=None) -> int:
     from autonomy import AutonomyClient
 
     client = AutonomyClient(ground_truth=load_ground_truth_arg(args.ground_truth), home_by_s=args.home_by)
-    try:
-        listener = eventlet.listen((args.host, args.port))
+    try:  # no SO_REUSEPORT: a second server on the port must fail, not share the simulator's connections
+        listener = eventlet.listen((args.host, args.port), reuse_port=False)
     except OSError as exc:
-        sys.exit(f"cannot listen on {args.host}:{args.port}: {exc} "
-                 f"(is another drive_rover.py running? pick another --port)")
+        _usage_error(f"--port: cannot listen on {args.host}:{args.port}: {exc} "
+                     f"(another drive_rover.py? stop it or pick another --port)")
     try:
         recorder = Recorder(args.image_folder) if args.image_folder else None
     except (OSError, ValueError) as exc:
-        sys.exit(f"cannot record into {args.image_folder}: {exc}")
+        _usage_error(f"image_folder: cannot record into {args.image_folder}: {exc}")
     if recorder is not None:
         log.info("recording into %s", recorder.folder)
     dashboard = None
@@ -321,9 +396,18 @@ def main(argv=None) -> int:
         try:
             dashboard = LiveDashboard(args.dashboard_port, title="drive_rover").start()
         except OSError as exc:
-            sys.exit(f"--dashboard-port: {exc}")
-    _, wsgi_app = build_server(client, recorder, map_saver, dashboard, hosts=(args.host,))
+            _usage_error(f"--dashboard-port: {exc}")
     host, port = listener.getsockname()[:2]
+    from link_status import LinkStatus
+
+    status = LinkStatus(time.monotonic(), f"{host}:{port}",
+                        f"python-socketio {installed_version('python-socketio')}, "
+                        f"python-engineio {installed_version('python-engineio')}")
+    import wire_server
+
+    _, wsgi_app = wire_server.build_server(client, recorder, map_saver, hosts=(args.host,),
+                                           dashboard=FrameObservers(status, dashboard), link=status)
+    eventlet.spawn(_report_status, status, client)
     log.info("listening on %s:%d; now start the simulator and choose Autonomous mode", host, port)
 
     def _shutdown(signum, frame):

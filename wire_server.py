@@ -226,9 +226,10 @@ class Session:
                 f"at close), ignored {sum(self.ignored.values())}: {reasons}")
 
 
-def build_server(client, recorder=None, map_saver=None, hosts=(), dashboard=None):
+def build_server(client, recorder=None, map_saver=None, hosts=(), dashboard=None, link=None):
     """(sio, wsgi_app): the Socket.IO server around ``client`` (an AutonomyClient),
-    wrapped in the Host check; ``hosts`` are extra Host names to serve (``--host``)."""
+    wrapped in the Host check; ``hosts`` are extra Host names to serve (``--host``);
+    ``link`` (link_status.LinkStatus) hears when a simulator connects and leaves."""
     import flask
     import socketio
 
@@ -259,6 +260,8 @@ def build_server(client, recorder=None, map_saver=None, hosts=(), dashboard=None
                                              pause=lambda: self.sleep(0))
                 self.start_background_task(self.sessions[sid].run)
                 log.info("simulator connected (%s, %s)", sid, environ.get("QUERY_STRING", ""))
+                if link is not None:
+                    link.on_connect(time.monotonic())
             else:
                 log.info("non-simulator client connected over %s (%s): it will not be answered",
                          transport, sid)
@@ -284,6 +287,8 @@ def build_server(client, recorder=None, map_saver=None, hosts=(), dashboard=None
             if session is not None:
                 session.close()
                 log.info("simulator disconnected (%s): %s", sid, session.summary())
+                if link is not None:
+                    link.on_disconnect(time.monotonic())
             if self.active == sid:
                 self.active = None
             super()._handle_eio_disconnect(sid)

@@ -42,7 +42,7 @@ def port_problem(host: str, port: int):
         s.bind(addr)
         s.listen(1)
     except OSError as exc:
-        reason = "already in use (another server is running there)" if exc.errno == errno.EADDRINUSE else exc.strerror
+        reason = "is already in use by another server" if exc.errno == errno.EADDRINUSE else f"cannot be used: {exc.strerror}"
         return f"{host}:{port} {reason}"
     finally:
         s.close()

@@ -24,13 +24,13 @@ or `_init_worker`; the outputs name whatever `MissionOptions.describe()` returns
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import io
 import logging
 import math
 import multiprocessing as mp
 import os
+import signal
 import statistics
 import time
 from dataclasses import dataclass, field, replace
@@ -38,9 +38,10 @@ from pathlib import Path
 
 from drive_rover import add_home_by_option
 from sim.backend import add_backend_options, evaluate_tasks
-from sim.cli import add_shadows_option, parse_with_logging
-from sim.mission import TIME_LIMIT_S, timing_label
-from sim.mission_parts import write_json_atomic
+from sim.cli import (INTERRUPTED_EXIT, add_shadows_option, check_paths, parse_with_logging, positive_int,
+                     positive_number, tool_parser)
+from sim.mission import INTERRUPTED, TIME_LIMIT_S, timing_label
+from sim.mission_parts import progress_bar, write_json_atomic
 from sim.timing import Timing, add_timing_options, timing_from_args
 
 log = logging.getLogger(__name__)
@@ -97,53 +98,96 @@ MATRIX_CONDITIONS = (
 )
 HOME_TARGET = "all six and home"  # the matrix's count column
 
+PROGRESS_STEP_S = 1.0  # simulated s between a worker's progress reports
+PROGRESS_POLL_S = 0.5  # wall s between progress-bar refreshes in the parent
+NOT_RUN = "not run (interrupted)"  # end_reason of seeds skipped after Ctrl-C
+ERROR_PREFIX = "error"  # end_reason prefix of a seed that raised
+
 _WORLD = None  # per-worker cached World
+_COUNTER = None  # per-worker shared simulated-seconds counter (multiprocessing.Value)
+_STOP = None  # per-worker shared stop flag (multiprocessing.Value), set by Ctrl-C
+_IN_MISSION = [False]  # a mission is running in this worker (Ctrl-C interrupts it)
 
 
 def parse_seeds(text: str) -> list:
-    """'0-19', '1,4,9', '3' or mixes like '0-4,10' -> sorted unique ints."""
+    """'0-19', '1,4,9', '3' or mixes like '0-4,10' -> sorted unique ints (>= 0)."""
     seeds = set()
     for part in str(text).split(","):
         part = part.strip()
         if not part:
             continue
-        if "-" in part[1:]:
-            lo, hi = part.split("-", 1) if not part.startswith("-") else (part, part)
-            lo, hi = int(lo), int(hi)
-            if hi < lo:
-                raise ValueError(f"bad seed range {part!r}")
-            seeds.update(range(lo, hi + 1))
-        else:
-            seeds.add(int(part))
+        lo, sep, hi = part.partition("-")
+        try:
+            lo, hi = int(lo), int(hi if sep else lo)
+        except ValueError:
+            raise ValueError(f"{part!r} is not a seed (a whole number >= 0) or a range like 0-19") from None
+        if hi < lo:
+            raise ValueError(f"range {part!r} runs backwards")
+        seeds.update(range(lo, hi + 1))
     if not seeds:
         raise ValueError(f"no seeds in {text!r}")
     return sorted(seeds)
 
 
-def _init_worker(world: WorldOptions, quiet=True):
-    global _WORLD
+class SimSecondsMeter:
+    """Mission watcher that adds simulated seconds to a shared counter every few frames,
+    so the parent's progress bar moves per frame, not per finished mission."""
+
+    def __init__(self, counter):
+        self.counter, self.sent = counter, 0.0
+
+    def observe(self, client, event=None, force=False):
+        t = client.rover.total_time
+        if force or t - self.sent >= PROGRESS_STEP_S:
+            with self.counter.get_lock():
+                self.counter.value += max(0.0, t - self.sent)
+            self.sent = t
+
+
+def _worker_sigint(signum, frame):
+    """Ctrl-C in a worker: the running mission stops and writes its partial files; no new ones start."""
+    if _STOP is not None:
+        _STOP.value = 1
+    if _IN_MISSION[0]:
+        _IN_MISSION[0] = False  # a second Ctrl-C must not interrupt the writing
+        raise KeyboardInterrupt
+
+
+def _init_worker(world: WorldOptions, quiet=True, counter=None, stop=None):
+    global _WORLD, _COUNTER, _STOP
     if quiet:  # worker processes: only warnings, the parent shows progress
         logging.basicConfig(level=logging.WARNING)
         logging.getLogger().setLevel(logging.WARNING)
+        signal.signal(signal.SIGINT, _worker_sigint)
     import cv2
 
     cv2.setNumThreads(1)  # one worker per core: no thread oversubscription
     from sim.world import load_world, with_shadows
 
     _WORLD = with_shadows(load_world(world.spec), world.shadows)
+    _COUNTER, _STOP = counter, stop
 
 
 def _run_seed(args):
     seed, out, options = args
     from sim.mission import run_mission
 
+    if _STOP is not None and _STOP.value:
+        return {"seed": seed, "end_reason": NOT_RUN}
     t0 = time.perf_counter()
+    watchers = [SimSecondsMeter(_COUNTER)] if _COUNTER is not None else []
+    _IN_MISSION[0] = True
     try:
-        return run_mission(seed, _WORLD, out=Path(out) / f"seed-{seed}", progress=False, **options.run_kwargs())
+        return run_mission(seed, _WORLD, out=Path(out) / f"seed-{seed}", progress=False, watchers=watchers,
+                           **options.run_kwargs())
+    except KeyboardInterrupt:  # Ctrl-C outside the mission loop (loading, scoring): nothing to write
+        return {"seed": seed, "end_reason": "interrupted before any result"}
     except Exception as exc:  # one bad seed must not sink the batch
         logging.getLogger(__name__).exception("seed %d failed", seed)
         return {"seed": seed, "end_reason": f"error: {type(exc).__name__}: {exc}",
                 "wall_s": round(time.perf_counter() - t0, 1)}
+    finally:
+        _IN_MISSION[0] = False
 
 
 def _num(v):
@@ -160,26 +204,61 @@ def summarise(results: list) -> dict:
     for key in SUMMARY_COLUMNS:
         vals = [x for x in (_num(r.get(key)) for r in results) if x is not None]
         out[key] = {"median": statistics.median(vals) if vals else None,
-                    "min": min(vals) if vals else None}
+                    "min": min(vals) if vals else None, "max": max(vals) if vals else None}
+        if any(isinstance(r.get(key), bool) for r in results):
+            out[key]["yes"] = sum(r.get(key) is True for r in results)
     return out
 
 
-def _cell(v):
+# evaluation.md: (column, heading, cell format) for people; the CSV/JSON keep the raw field names
+MD_COLUMNS = (("seed", "seed", "{}"), ("mapped_pct", "mapped", "{:.1f} %"), ("fidelity_pct", "fidelity", "{:.1f} %"),
+              ("located", "located", "{}"), ("collected", "collected", "{}"), ("returned_home", "home", "{}"),
+              ("time_s", "time", "{:.0f} s"), ("stuck_time_s", "stuck", "{:.0f} s"),
+              ("longest_stuck_s", "longest stuck", "{:.0f} s"), ("distance_m", "driven", "{:.0f} m"),
+              ("frames_per_s", "speed", "{:.0f} frames/s"), ("end_reason", "how it ended", "{}"))
+MD_INTRO = ("Mapped: share of the true navigable ground the client marked navigable; fidelity: share of its "
+            "navigable marks that are right; located: samples with a rock mark within 3 m; collected: samples "
+            "picked up; home: all collected and back within 3 m of the start. Time is simulated.\n")
+LOWER_IS_BETTER = ("time_s", "stuck_time_s", "longest_stuck_s")  # the "worst" row takes their maximum
+
+
+def _cell(v, fmt="{}"):
     if v is None:
         return "n/a"
     if isinstance(v, bool):
         return "yes" if v else "no"
-    if isinstance(v, float):
+    if isinstance(v, float) and fmt == "{}":
         return f"{v:.1f}"
-    return str(v)
+    try:
+        return fmt.format(v)
+    except (ValueError, TypeError):
+        return str(v)
+
+
+def _of_samples(r, key):
+    v = r.get(key)
+    return "n/a" if v is None else f"{v}/{r.get('samples', '?')}"
 
 
 def markdown_table(results: list, summary: dict) -> str:
-    lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    """Per-seed rows, then a median row and a worst row; yes/no columns are counted, not averaged."""
+    lines = ["| " + " | ".join(h for _, h, _ in MD_COLUMNS) + " |", "|" + "---|" * len(MD_COLUMNS)]
     for r in results:
-        lines.append("| " + " | ".join(_cell(r.get(c)) for c in COLUMNS) + " |")
-    for stat in ("median", "min"):
-        row = [stat] + [_cell(summary[c][stat]) if c in summary else "" for c in COLUMNS[1:]]
+        cells = [_of_samples(r, c) if c in ("located", "collected") else _cell(r.get(c), fmt)
+                 for c, _, fmt in MD_COLUMNS]
+        lines.append("| " + " | ".join(cells) + " |")
+    n = len([r for r in results if "mapped_pct" in r])
+    for stat, label in (("median", "median"), ("worst", "worst")):
+        row = [label]
+        for c, _, fmt in MD_COLUMNS[1:]:
+            if c not in summary:
+                row.append("")
+            elif c == "returned_home":
+                row.append(f"{summary[c].get('yes', 0)}/{n} yes" if stat == "median" else "")
+            else:
+                v = summary[c].get("max" if stat == "worst" and c in LOWER_IS_BETTER else
+                                   ("min" if stat == "worst" else "median"))
+                row.append(_cell(v, "{:g}" if c in ("located", "collected") else fmt))
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines) + "\n"
 
@@ -204,7 +283,10 @@ def write_outputs(out: Path, results, summary, meta):
           + (f", client home by {meta['home_by_s']:.0f} s" if meta.get("home_by_s") else "")
           + (f", client {meta['client']}" if meta.get("client") else "")
           + (f", Dask scheduler {meta['backend']}" if meta.get("backend", "local") != "local" else "")
-          + "\n\n" + markdown_table(results, summary))
+          + "\n\n" + MD_INTRO
+          + (f"\n**Interrupted (Ctrl-C)**: {meta.get('finished', 0)} of {meta['count']} missions finished; "
+             "partial missions are listed but not in the median/worst rows.\n" if meta.get("interrupted") else "")
+          + "\n" + markdown_table(results, summary))
     _write_text_atomic(out / "evaluation.md", md)
     return md
 
@@ -218,38 +300,86 @@ def evaluate(seeds, world_spec="default", jobs=DEFAULT_JOBS, time_limit=TIME_LIM
 
 
 def run_batch(seeds, world: WorldOptions, options: MissionOptions, jobs=DEFAULT_JOBS, out=DEFAULT_OUT,
-              progress=True, desc="missions") -> dict:
-    from tqdm import tqdm
+              progress=True, desc="evaluation") -> dict:
+    """Missions on ``jobs`` worker processes with one progress bar in simulated seconds (moving per
+    frame, not per finished mission).  Ctrl-C stops the running missions, which write their partial
+    files; the outputs then list them and meta["interrupted"] is True."""
+    from tqdm.contrib.logging import logging_redirect_tqdm
 
     out = Path(out)
     tasks = [(s, str(out), options) for s in seeds]
     jobs = max(1, min(int(jobs), len(tasks)))
     t0 = time.perf_counter()
-    results = []
-    with tqdm(total=len(tasks), unit="mission", disable=not progress, desc=desc) as bar:
+    results, interrupted = [], False
+    with progress_bar(len(tasks) * options.time_limit, progress, desc) as bar, logging_redirect_tqdm():
         if jobs == 1:
-            _init_worker(world, quiet=False)
-            for t in tasks:
-                results.append(_run_seed(t))
-                bar.update(1)
-        else:
-            # spawn, not fork: numba/OpenCV thread pools started in this process (e.g. by
-            # the procedural world) deadlock a forked child
-            ctx = mp.get_context("spawn")
-            with ctx.Pool(jobs, initializer=_init_worker, initargs=(world, True)) as pool:
-                for r in pool.imap_unordered(_run_seed, tasks):
+            counter = mp.Value("d", 0.0)
+            _init_worker(world, quiet=False, counter=counter)
+            credited = 0.0
+            try:
+                for t in tasks:
+                    r = _run_seed(t)
                     results.append(r)
-                    bar.update(1)
-                pool.close()  # let workers exit cleanly (terminate() leaks their semaphores)
-                pool.join()
-    results.sort(key=lambda r: r["seed"])
-    summary = summarise([r for r in results if "mapped_pct" in r])
+                    credited += options.time_limit - float(r.get("time_s") or 0.0)
+                    bar.n = min(bar.total, int(counter.value + credited))
+                    bar.refresh()
+                    if str(r.get("end_reason", "")).startswith(INTERRUPTED):
+                        interrupted = True
+                        break
+            except KeyboardInterrupt:
+                interrupted = True
+        else:
+            results, interrupted = _run_pool(tasks, jobs, world, bar, options.time_limit)
+    results = sorted((r for r in results if r.get("end_reason") != NOT_RUN), key=lambda r: r["seed"])
+    done = [r for r in results if "mapped_pct" in r and r.get("end_reason") != INTERRUPTED]
+    summary = summarise(done)
     world_name = next((r.get("world") for r in results if r.get("world")), world.spec)
     meta = {"world": world_name, "seeds": f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0]),
-            "count": len(seeds), **world.describe(), "jobs": jobs, **options.describe(),
+            "count": len(seeds), "finished": len(done), **world.describe(), "jobs": jobs, **options.describe(),
+            "interrupted": interrupted,
+            "failed": sum(str(r.get("end_reason", "")).startswith(ERROR_PREFIX) for r in results),
             "wall_s": round(time.perf_counter() - t0, 1)}
     md = write_outputs(out, results, summary, meta)
     return {"meta": meta, "summary": summary, "missions": results, "markdown": md}
+
+
+def _run_pool(tasks, jobs, world: WorldOptions, bar, time_limit):
+    """The missions on worker processes; returns (results, interrupted)."""
+    # spawn, not fork: numba/OpenCV thread pools started in this process (e.g. by
+    # the procedural world) deadlock a forked child
+    ctx = mp.get_context("spawn")
+    counter, stop = ctx.Value("d", 0.0), ctx.Value("b", 0)
+    results, credited, interrupted = [], 0.0, []
+    with ctx.Pool(jobs, initializer=_init_worker, initargs=(world, True, counter, stop)) as pool:
+        def on_sigint(signum, frame):
+            if interrupted:
+                return
+            interrupted.append(True)
+            stop.value = 1
+            log.warning("Ctrl-C: the running missions stop and write their partial results")
+            for proc in list(getattr(pool, "_pool", [])):  # in case only this process got the signal
+                try:
+                    os.kill(proc.pid, signal.SIGINT)
+                except OSError:
+                    pass
+
+        previous = signal.signal(signal.SIGINT, on_sigint)
+        try:
+            it = pool.imap_unordered(_run_seed, tasks)
+            while len(results) < len(tasks):
+                try:
+                    r = it.next(timeout=PROGRESS_POLL_S)
+                    results.append(r)
+                    credited += time_limit - float(r.get("time_s") or 0.0)  # a mission that ended early
+                except mp.TimeoutError:
+                    pass
+                bar.n = min(bar.total, int(counter.value + credited))
+                bar.refresh()
+            pool.close()  # let workers exit cleanly (terminate() leaks their semaphores)
+            pool.join()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+    return results, bool(interrupted)
 
 
 # ----------------------------------------------------------------------------- the matrix
@@ -305,7 +435,10 @@ def run_matrix(seeds, world_spec="default", jobs=DEFAULT_JOBS, out=DEFAULT_OUT, 
                         jobs, out / cond.name, progress, desc=cond.name)
         rows.append(matrix_row(cond, res))
         _write_matrix(out, rows, seeds, options)  # partial tables survive an interrupted run
-    return {"rows": rows, "markdown": matrix_markdown(rows, seeds, options.time_limit)}
+        if res["meta"].get("interrupted"):  # Ctrl-C: no further conditions
+            break
+    return {"rows": rows, "markdown": matrix_markdown(rows, seeds, options.time_limit),
+            "interrupted": bool(rows) and res["meta"].get("interrupted", False)}
 
 
 def _write_matrix(out: Path, rows, seeds, options: MissionOptions):
@@ -315,12 +448,14 @@ def _write_matrix(out: Path, rows, seeds, options: MissionOptions):
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description="Run many twin missions and summarise them.")
-    p.add_argument("--seeds", default="0-19", help="e.g. 0-19 or 1,5,9")
+    p = tool_parser("python -m sim.evaluate", "Run many twin missions (both cores) and summarise them in "
+                    "<out>/evaluation.{md,csv,json}; per-seed files in <out>/seed-N/.")
+    p.add_argument("--seeds", default="0-19", help="e.g. 0-19 or 1,5,9 (default %(default)s)")
     p.add_argument("--world", default="default", help="real | procedural:K | PATH.png (default: real if present)")
-    p.add_argument("--jobs", type=int, default=DEFAULT_JOBS, help="worker processes")
-    p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, help="simulated seconds per mission")
-    p.add_argument("--out", default=DEFAULT_OUT)
+    p.add_argument("--jobs", type=positive_int, default=DEFAULT_JOBS, help="worker processes (default %(default)s)")
+    p.add_argument("--time-limit", type=positive_number, default=TIME_LIMIT_S, metavar="SECONDS",
+                   help="simulated seconds per mission (default %(default).0f)")
+    p.add_argument("--out", default=DEFAULT_OUT, help="output folder (default %(default)s)")
     p.add_argument("--matrix", action="store_true",
                    help="run the seeds under each condition of " + ", ".join(c.name for c in MATRIX_CONDITIONS)
                         + " (unity timing; overrides --shadows/--timing/--fps/--latency-ms) and print one table")
@@ -328,22 +463,23 @@ def main(argv=None) -> int:
     add_shadows_option(p)
     add_backend_options(p)
     add_timing_options(p)
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     a = parse_with_logging(p, argv)
     try:
         seeds = parse_seeds(a.seeds)
+    except ValueError as exc:
+        p.error(f"--seeds: {exc}")
+    try:
         timing = timing_from_args(a)
     except ValueError as exc:
         p.error(str(exc))
-    if not (a.time_limit > 0 and math.isfinite(a.time_limit)):
-        p.error("--time-limit must be a positive number of seconds")
+    check_paths(p, a, folders=("--out",))
     try:
         from sim.world import load_world
 
         load_world(a.world)  # fail early and clearly on a bad --world
     except (ValueError, FileNotFoundError) as exc:
-        log.error("%s", exc)
-        return 2
+        p.error(f"--world: {exc}")
     options = MissionOptions(a.time_limit, a.home_by, timing)
     t0 = time.perf_counter()
     if a.matrix:
@@ -351,7 +487,7 @@ def main(argv=None) -> int:
         print(res["markdown"])
         log.info("wrote %s/matrix.{md,json} and one folder per condition in %.0f s", a.out,
                  time.perf_counter() - t0)
-        return 0
+        return INTERRUPTED_EXIT if res["interrupted"] else 0
     log.info("timing: %s", timing.label())
     if a.client or a.scheduler:  # another client and/or a Dask cluster: sim/backend.py
         if timing != Timing():
@@ -364,13 +500,25 @@ def main(argv=None) -> int:
         except (ValueError, FileNotFoundError) as exc:
             log.error("%s", exc)
             return 2
-        log.info("\n%s", res["markdown"])
-        log.info("wrote %s/evaluation.{json,csv,md} in %.0f s", a.out, res["meta"]["wall_s"])
-        return 0
-    res = run_batch(seeds, WorldOptions(a.world, a.shadows == "on"), options, a.jobs, a.out,
-                    progress=not a.no_progress)
-    log.info("\n%s", res["markdown"])
-    log.info("wrote %s/evaluation.{json,csv,md} in %.0f s", a.out, res["meta"]["wall_s"])
+    else:
+        res = run_batch(seeds, WorldOptions(a.world, a.shadows == "on"), options, a.jobs, a.out,
+                        progress=not a.no_progress)
+    return _report(res, a.out)
+
+
+def _report(res, out) -> int:
+    """Print the table; exit status 130 after Ctrl-C, 1 when a mission failed, else 0."""
+    meta = res["meta"]
+    failed = sum(str(r.get("end_reason", "")).startswith(ERROR_PREFIX) for r in res["missions"])
+    print(res["markdown"])
+    log.info("wrote %s/evaluation.{json,csv,md} in %.0f s", out, meta["wall_s"])
+    if meta.get("interrupted"):
+        log.warning("interrupted: %d of %d missions finished; the files above hold them and the partial ones",
+                    meta.get("finished", 0), meta["count"])
+        return INTERRUPTED_EXIT
+    if failed:
+        log.error("%d of %d missions failed (see 'how it ended' in evaluation.md)", failed, meta["count"])
+        return 1
     return 0
 
 

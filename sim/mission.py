@@ -20,7 +20,6 @@ home, time and stuck figures come from the twin's ground truth.
 """
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 import statistics
@@ -32,7 +31,8 @@ import numpy as np
 
 from dashboard import add_dashboard_options
 from drive_rover import add_home_by_option
-from sim.cli import add_shadows_option, parse_with_logging
+from sim.cli import (INTERRUPTED_EXIT, add_shadows_option, check_paths, parse_with_logging, positive_number,
+                     seed_number, tool_parser)
 from sim.mission_parts import (HOME_RADIUS_M, StuckMeter, TruthTrack, nan_to_none, open_recorder,  # noqa: F401
                                progress_bar, write_json_atomic, write_npy_atomic, write_png_atomic)
 from sim.timing import Timing, TwinLoop, add_timing_options, frame_after, frame_time, timing_from_args
@@ -42,6 +42,7 @@ log = logging.getLogger(__name__)
 TIME_LIMIT_S = 900.0  # simulated seconds before a mission is stopped
 MAP_PNG_SCALE = 4  # px per metre in the mission PNG
 DEFAULT_OUT_ROOT = "out"  # default output folder root
+INTERRUPTED = "interrupted"  # end_reason of a mission stopped by Ctrl-C (its files hold the partial run)
 
 
 @dataclass
@@ -196,6 +197,9 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
             if getattr(client.rover, "mission_complete", False):
                 end_reason, completed = "mission complete", True
                 break
+    except KeyboardInterrupt:  # Ctrl-C: stop here and let the caller write what we have
+        end_reason = INTERRUPTED
+        log.warning("Ctrl-C at %.0f s simulated: writing the partial mission", twin.sim_time)
     finally:
         for watcher in watchers:
             watcher.observe(client, None, force=True)
@@ -247,13 +251,14 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
 
 def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,
                 wire=False, progress=True, render=True, write_files=True, home_by=None, dashboard=None,
-                dashboard_port=None, timing: Timing | None = None) -> dict:
+                dashboard_port=None, timing: Timing | None = None, watchers=()) -> dict:
     """Run, score and (optionally) write mission.json + mission.png; returns the result dict.
 
     home_by: the client's return deadline, s (None: its default, decision.HOME_BY_S).
     dashboard: a live dashboard (in-process missions) fed every frame; dashboard_port: with
     ``wire``, drive_rover.py serves the dashboard itself on this port.
     timing: the simulator loop (default Timing(): the real simulator's at 30 fps).
+    watchers: more per-frame observers for in-process missions (e.g. sim.evaluate's progress meter).
     """
     timing = timing or Timing()
     from sim.world import World, load_world
@@ -271,7 +276,7 @@ def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, vide
         from dashboard.timeline import Timeline
 
         timeline = Timeline() if write_files else None
-        watchers = [w for w in (timeline, dashboard) if w is not None]
+        watchers = [w for w in (timeline, dashboard, *watchers) if w is not None]
         summary = run_inprocess(world_obj, seed, time_limit=time_limit, video=video, record=record,
                                 progress=progress, render=render, home_by=home_by, watchers=watchers,
                                 timing=timing)
@@ -336,10 +341,12 @@ def timing_label(r: dict) -> str:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description="Run one autonomous mission on the digital twin.")
-    p.add_argument("--seed", type=int, default=0, help="scene seed: start yaw and samples")
+    p = tool_parser("python -m sim.mission", "Run one autonomous mission on the digital twin and score it "
+                    "(mission.json, mission.png, worldmap.npy, timeline.npz in --out).")
+    p.add_argument("--seed", type=seed_number, default=0, help="scene seed >= 0: start yaw and samples (default 0)")
     p.add_argument("--world", default="default", help="real | procedural:K | PATH.png (default: real if present)")
-    p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, help="simulated seconds")
+    p.add_argument("--time-limit", type=positive_number, default=TIME_LIMIT_S, metavar="SECONDS",
+                   help="simulated seconds before the mission is stopped (default %(default).0f)")
     p.add_argument("--out", default=None, help="output folder (default out/mission-seedN)")
     p.add_argument("--video", default=None, help="write camera + map video (mp4)")
     p.add_argument("--record", default=None, help="record a simulator-format log (robot_log.csv + IMG)")
@@ -348,14 +355,20 @@ def main(argv=None) -> int:
     add_shadows_option(p)
     add_dashboard_options(p)
     add_timing_options(p)
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     a = parse_with_logging(p, argv)
-    if a.time_limit <= 0 or not math.isfinite(a.time_limit):
-        p.error("--time-limit must be a positive number of seconds")
+    a.out = a.out or str(Path(DEFAULT_OUT_ROOT) / f"mission-seed{a.seed}")
+    check_paths(p, a, folders=("--out", "--record"), files=("--video",))
     try:
         timing = timing_from_args(a)
     except ValueError as exc:
         p.error(str(exc))
+    try:
+        from sim.world import load_world, with_shadows
+
+        world = with_shadows(load_world(a.world), a.shadows == "on")
+    except (ValueError, FileNotFoundError) as exc:
+        p.error(f"--world: {exc}")
     log.info("timing: %s", timing.label())
     dash = None
     if a.dashboard and not a.wire:
@@ -374,18 +387,24 @@ def main(argv=None) -> int:
         if problem:
             p.error(f"--dashboard-port: {problem}")
         log.info("dashboard (served by drive_rover.py): open http://127.0.0.1:%d/ in a browser", a.dashboard_port)
-    try:
-        from sim.world import load_world, with_shadows
+    from tqdm.contrib.logging import logging_redirect_tqdm
 
-        world = with_shadows(load_world(a.world), a.shadows == "on")
-        r = run_mission(a.seed, world, a.time_limit, a.out, a.video, a.record, a.wire,
-                        progress=not a.no_progress, home_by=a.home_by, dashboard=dash, timing=timing,
-                        dashboard_port=a.dashboard_port if a.dashboard and a.wire else None)
+    try:
+        with logging_redirect_tqdm():  # log lines print above the progress bar instead of through it
+            r = run_mission(a.seed, world, a.time_limit, a.out, a.video, a.record, a.wire,
+                            progress=not a.no_progress, home_by=a.home_by, dashboard=dash, timing=timing,
+                            dashboard_port=a.dashboard_port if a.dashboard and a.wire else None)
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
-        return 2
+        return 1
+    except KeyboardInterrupt:  # before the mission loop started or while writing: nothing (more) to save
+        log.warning("interrupted before the mission could be written")
+        return INTERRUPTED_EXIT
     log.info("%s", format_result(r))
     log.info("wrote %s", ", ".join(r["files"].values()))
+    if r["end_reason"] == INTERRUPTED:
+        log.warning("interrupted: the files above hold the mission up to %.0f s", r["time_s"])
+        return INTERRUPTED_EXIT
     if dash is not None:
         _keep_showing(dash, r)
     return 0

@@ -138,11 +138,16 @@ def all_collected_and_home(truth) -> bool:
 
 
 # ----------------------------------------------------------------------------- edges
+PROGRESS_FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} sim s [{elapsed}<{remaining}]"  # tqdm layout
+
+
 def progress_bar(total, enabled, desc):
-    """tqdm bar counting simulated seconds."""
+    """tqdm bar counting simulated seconds, shown as whole seconds; it stays on screen at the end
+    (callers wrap their run in tqdm's logging_redirect_tqdm so log lines do not break it)."""
     from tqdm import tqdm
 
-    return tqdm(total=round(total), unit="sim s", disable=not enabled, desc=desc, leave=False)
+    return tqdm(total=round(total), unit="sim s", disable=not enabled, desc=desc, leave=True,
+                bar_format=PROGRESS_FORMAT)
 
 
 def open_recorder(folder):

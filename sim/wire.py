@@ -28,7 +28,6 @@ throws and the chain stalls); the twin logs it and keeps running.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import math
@@ -40,7 +39,7 @@ import threading
 import time
 from pathlib import Path
 
-from sim.cli import parse_with_logging
+from sim.cli import check_paths, non_negative_int, parse_with_logging, port_number, seed_number, tool_parser
 from sim.mission_parts import TruthTrack, all_collected_and_home, open_recorder, progress_bar
 from sim.timing import UNITY_FPS, WIRE_LATENCY_MS, Timing
 
@@ -416,6 +415,9 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
             raise RuntimeError(f"drive_rover.py did not start on port {port} (exit {proc.poll()})")
         sim.last_command_wall = time.monotonic()
         sim.run()
+    except KeyboardInterrupt:  # Ctrl-C: the caller writes the partial mission
+        state["end"] = "interrupted"
+        log.warning("Ctrl-C at %.0f s simulated: writing the partial mission", twin.sim_time)
     finally:
         bar.close()
         stop_process(proc)
@@ -443,10 +445,11 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
 
 # ------------------------------------------------------------------------ CLI
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description="Headless RoboND rover simulator on the real wire protocol.")
-    p.add_argument("--host", default="127.0.0.1")
-    p.add_argument("--port", type=int, default=4567)
-    p.add_argument("--seed", type=int, default=0)
+    p = tool_parser("python -m sim.wire", "Headless RoboND rover simulator on the real wire protocol: connects "
+                    "to a client (python drive_rover.py) like the Unity program does.")
+    p.add_argument("--host", default="127.0.0.1", help="client address (default %(default)s)")
+    p.add_argument("--port", type=port_number, default=4567, help="client port (default %(default)s)")
+    p.add_argument("--seed", type=seed_number, default=0, help="scene seed >= 0 (default 0)")
     p.add_argument("--world", default="default", help="real | procedural:K | PATH.png")
     p.add_argument("--mode", choices=MODES, default="realtime",
                    help="realtime (default): the real simulator's loop on the wall clock, no sim_time; "
@@ -456,17 +459,19 @@ def main(argv=None) -> int:
                    help="realtime: hold each command back this long on top of the real transport, ms")
     p.add_argument("--time-limit", type=float, default=0.0, help="stop after this many simulated s (0 = never)")
     p.add_argument("--record", default=None, help="record a simulator-format log into this folder")
-    p.add_argument("--open-telemetry", type=int, default=OPEN_TELEMETRY_COUNT,
+    p.add_argument("--open-telemetry", type=non_negative_int, default=OPEN_TELEMETRY_COUNT,
                    help="telemetry messages sent when the socket opens (the real sim: ~2)")
     a = parse_with_logging(p, argv)
+    if not (math.isfinite(a.time_limit) and a.time_limit >= 0):
+        p.error(f"--time-limit: must be >= 0 seconds, got {a.time_limit}")
+    check_paths(p, a, folders=("--record",))
     from sim.twin import RoverTwin
     from sim.world import load_world
 
     try:
         world = load_world(a.world)
     except (ValueError, FileNotFoundError) as exc:
-        log.error("%s", exc)
-        return 2
+        p.error(f"--world: {exc}")
     if not (math.isfinite(a.fps) and a.fps > 0) or not (math.isfinite(a.extra_latency_ms) and a.extra_latency_ms >= 0):
         p.error("--fps must be positive and --extra-latency-ms non-negative")
     twin = RoverTwin(world, seed=a.seed, sim_time_field=a.mode == "lockstep")

@@ -72,13 +72,17 @@ def test_parse_seeds_and_summary():
         parse_seeds("9-2")
     with pytest.raises(ValueError):
         parse_seeds("x")
+    with pytest.raises(ValueError):
+        parse_seeds("-3")
     rows = [{"seed": 0, "mapped_pct": 40.0, "returned_home": True, "fidelity_pct": None},
             {"seed": 1, "mapped_pct": 60.0, "returned_home": False, "fidelity_pct": 70.0}]
     s = summarise(rows)
-    assert s["mapped_pct"] == {"median": 50.0, "min": 40.0}
+    assert s["mapped_pct"] == {"median": 50.0, "min": 40.0, "max": 60.0}
     assert s["returned_home"]["min"] == 0.0 and s["fidelity_pct"]["median"] == 70.0
+    assert s["returned_home"]["yes"] == 1
     md = markdown_table(rows, s)
     assert "| median |" in md and "n/a" in md
+    assert "| 1/2 yes |" in md and "mapped_pct" not in md  # yes/no counted, headings for people
 
 
 def test_record_mode_writes_a_log_the_replay_reader_reads(world, tmp_path):
