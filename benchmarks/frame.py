@@ -172,7 +172,7 @@ def dashboard_comparison(telemetry, repeat, insets):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.frame", description=__doc__.split("\n")[0])
     p.add_argument("--log", default=None, help="simulator log folder (default: shared test_dataset)")
     p.add_argument("--repeat", type=int, default=REPEAT, help="passes over the log")
     p.add_argument("--no-insets", action="store_true", help="skip inset encoding")

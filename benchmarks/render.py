@@ -98,7 +98,7 @@ def mission_speed(world, seconds, seed=0):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.render", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--world", default="default")
     parser.add_argument("--frames", type=int, default=283, help="poses rendered (test_dataset has 283)")
     parser.add_argument("--mission-s", type=float, default=60.0, help="simulated seconds of the mission run")

@@ -171,7 +171,7 @@ def _interrupt(signum, frame):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.soak", description=__doc__.split("\n")[0])
     p.add_argument("--frames", type=int, default=REPORT_EVERY * 2, help="telemetry frames to send")
     p.add_argument("--chains", type=int, default=CHAINS, help="telemetries in flight (the simulator: 2)")
     p.add_argument("--every", type=int, default=REPORT_EVERY, help="frames between report lines")

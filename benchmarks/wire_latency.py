@@ -84,7 +84,7 @@ def measure(port: int, count: int) -> list:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m benchmarks.wire_latency", description=__doc__.split("\n")[0])
     p.add_argument("--count", type=int, default=COUNT)
     p.add_argument("--serve", type=int, default=None, help=argparse.SUPPRESS)
     a = p.parse_args(argv)

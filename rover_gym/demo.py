@@ -54,7 +54,7 @@ def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=False, timing
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description="Baseline policy in the RoverTwin-v0 Gymnasium env.")
+    p = argparse.ArgumentParser(prog="python -m rover_gym.demo", description="Baseline policy in the RoverTwin-v0 Gymnasium env.")
     p.add_argument("--steps", type=int, default=DEFAULT_STEPS, help="env steps (0.04 s each)")
     p.add_argument("--world", default="default", help="real | procedural:K | PATH.png")
     p.add_argument("--seed", type=int, default=0, help="scene seed")

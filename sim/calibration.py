@@ -113,7 +113,7 @@ def render_calibration_images(world_spec="procedural:0"):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(prog="python -m sim.calibration", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--world", default="procedural:0", help="world spec (default: the project's own canyon)")
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent.parent / "calibration_images"))
     args = parser.parse_args(argv)

@@ -93,7 +93,7 @@ def ceiling(world: World, truth: np.ndarray) -> Ceiling:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(prog="python -m sim.ceiling", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--json", help="also write the figures here")
     a = parse_with_logging(p, argv)
     import shared_data

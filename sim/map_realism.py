@@ -164,7 +164,7 @@ def places_image(real_map, twin_map, truth, places, title: str) -> np.ndarray:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(prog="python -m sim.map_realism", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--log", default=DEFAULT_LOG, help="test_dataset, a real-logs folder name, a log folder or csv")
     p.add_argument("--stride", type=int, default=DEFAULT_STRIDE, help="use every N-th frame")
     p.add_argument("--out", default="out/map-realism", help="folder for metrics.json and the map images")

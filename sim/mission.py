@@ -41,6 +41,7 @@ log = logging.getLogger(__name__)
 
 TIME_LIMIT_S = 900.0  # simulated seconds before a mission is stopped
 MAP_PNG_SCALE = 4  # px per metre in the mission PNG
+MAP_TRAIL_POINTS = 4000  # trail points drawn in the mission PNG at most (thinned evenly), count
 DEFAULT_OUT_ROOT = "out"  # default output folder root
 INTERRUPTED = "interrupted"  # end_reason of a mission stopped by Ctrl-C (its files hold the partial run)
 
@@ -78,46 +79,55 @@ class MissionResult:
     telemetry_hz: float | None = None  # telemetry messages per simulated second
     reply_delay_ms: float | None = None  # median capture -> command applied, ms of simulated time
     round_trip_ms: float | None = None  # wire, unity timing: median capture -> command received, wall ms
+    time_limit_s: float | None = None  # the mission's time limit (--time-limit), simulated s
+    code_version: str | None = None  # git commit of the code that ran (+ "-dirty" with local changes)
 
     def as_dict(self):
         return {k: nan_to_none(v) for k, v in asdict(self).items()}
 
 
 # ----------------------------------------------------------------------------- the PNG
-def mission_image(world, worldmap, trajectory, initial_samples, collected_xy, start_xy, stuck_xy=()):
-    """BGR image, north up: truth grey, mapped navigable blue, obstacles red, trail yellow."""
-    import cv2
+def mission_image(world, worldmap, trajectory, initial_samples, collected_xy, start_xy, stuck_xy=(), result=None):
+    """BGR picture of a mission, north up, in the replay map's colours (dashboard.mapview): the
+    client's map scored against the truth, trail, samples (collected or not), stuck places, start;
+    with ``result`` (a MissionResult) a title, the figures and a legend."""
+    from dashboard import mapview
 
-    truth = world.nav_truth > 0
-    img = np.zeros((200, 200, 3), np.uint8)
-    img[truth] = (70, 70, 70)
-    if worldmap is not None:
-        nav = worldmap[:, :, 2] > 0
-        obs = (worldmap[:, :, 0] > 0) & ~nav
-        img[obs] = (0, 0, 150)
-        img[nav & truth] = (255, 120, 0)
-        img[nav & ~truth] = (200, 0, 200)  # false navigable: magenta
-        img[worldmap[:, :, 1] > 0] = (0, 255, 0)
-    s = MAP_PNG_SCALE
-    big = cv2.resize(img, (200 * s, 200 * s), interpolation=cv2.INTER_NEAREST)
-
-    def px(x, y):
-        return int(round(x * s)), int(round((200 - y) * s))
-
-    big = np.ascontiguousarray(big[::-1])  # north up for display
-    if len(trajectory) > 1:
-        pts = np.array([px(x, y) for x, y in trajectory], np.int32).reshape(-1, 1, 2)
-        cv2.polylines(big, [pts], False, (0, 230, 255), 1, cv2.LINE_AA)
     collected = {(round(x, 3), round(y, 3)) for x, y in collected_xy}
-    for smp in initial_samples:
-        got = (round(smp[0], 3), round(smp[1], 3)) in collected
-        cv2.circle(big, px(*smp[:2]), 6, (0, 255, 0) if got else (0, 200, 255), 2)
-    for x, y in stuck_xy:
-        cv2.drawMarker(big, px(x, y), (0, 0, 255), cv2.MARKER_TILTED_CROSS, 12, 2)
-    cv2.drawMarker(big, px(*start_xy), (255, 255, 255), cv2.MARKER_CROSS, 14, 2)
-    if len(trajectory):
-        cv2.circle(big, px(*trajectory[-1]), 4, (255, 255, 255), -1)
-    return big
+    left = [s[:2] for s in initial_samples if (round(s[0], 3), round(s[1], 3)) not in collected]
+    traj = np.asarray(trajectory, float).reshape(-1, 2)
+    trail = traj[:: max(1, len(traj) // MAP_TRAIL_POINTS)]
+    if len(traj):
+        trail = np.vstack([trail, traj[-1:]])
+    wm = worldmap if worldmap is not None else np.zeros(world.nav_truth.shape + (3,), np.uint8)
+    pose = None
+    if len(traj) > 1:
+        d = traj[-1] - traj[max(0, len(traj) - 10)]
+        pose = (traj[-1][0], traj[-1][1], math.degrees(math.atan2(d[1], d[0])))
+    img = mapview.scene(wm, world.nav_truth, scale=MAP_PNG_SCALE, trail=trail, samples=left,
+                        collected=list(collected_xy), stuck=stuck_xy, start=start_xy, pose=pose)
+    if result is None:
+        return img
+    return mapview.titled(img, *mission_caption(result.as_dict()))
+
+
+MODE_NAMES = {"inprocess": "in-process", "wire": "over the wire"}  # mission modes as mission.png names them
+
+
+def mission_caption(r: dict):
+    """(title, figure lines) for mission.png."""
+    def pct(v):
+        return "n/a" if v is None else f"{v:.1f} %"
+
+    title = f"Seed {r['seed']} on {r['world']}: {r['end_reason']} at {r['time_s']:.0f} s"
+    lines = [f"mapped {pct(r['mapped_pct'])}   fidelity {pct(r['fidelity_pct'])}   located "
+             f"{'n/a' if r['located'] is None else r['located']}/{r['samples']}   collected "
+             f"{r['collected']}/{r['samples']}   home {'yes' if r['returned_home'] else 'no'}",
+             f"stuck {r['stuck_time_s']:.0f} s (longest {r['longest_stuck_s']:.0f} s)   driven "
+             f"{r['distance_m']:.0f} m   {MODE_NAMES.get(r['mode'], r['mode'])}, {timing_label(r)}, shadows "
+             f"{'on' if r.get('shadows') else 'off'}"
+             + (f", home by {r['home_by_s']:.0f} s" if r.get("home_by_s") else "")]
+    return title, lines
 
 
 # ----------------------------------------------------------------------------- in-process
@@ -295,13 +305,15 @@ def finish_mission(world_obj, seed, mode, summary, time_limit, out=None, write_f
     summary["stuck"].close_run()
     result = score(world_obj, seed, mode, summary, time_limit)
     result.home_by_s = home_by
+    result.time_limit_s = time_limit
+    result.code_version = code_version()
     if write_files:
         out = Path(out) if out else Path(DEFAULT_OUT_ROOT) / f"mission-seed{seed}"
         tr = summary["twin"].truth
         img = mission_image(world_obj, summary.get("worldmap"), summary["traj"],
                             [(s.x, s.y) for s in tr.initial_samples],
                             [(s.x, s.y) for s in tr.collected], tr.start_xy,
-                            [(st[1], st[2]) for st in result.stuck_stretches])
+                            [(st[1], st[2]) for st in result.stuck_stretches], result)
         write_png_atomic(out / "mission.png", img)
         result.files = {"json": str(out / "mission.json"), "png": str(out / "mission.png")}
         if summary.get("worldmap") is not None:
@@ -315,6 +327,22 @@ def finish_mission(world_obj, seed, mode, summary, time_limit, out=None, write_f
             result.files["record"] = str(record)
         write_json_atomic(out / "mission.json", result.as_dict())
     return result.as_dict()
+
+
+def code_version() -> str:
+    """``git describe --always --dirty`` of this checkout, or the source hash outside git."""
+    import subprocess
+
+    try:
+        out = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=Path(__file__).resolve().parent,
+                             capture_output=True, text=True, timeout=10)
+        if out.returncode == 0 and out.stdout.strip():
+            return out.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    from sim.backend import code_fingerprint
+
+    return "source " + code_fingerprint()
 
 
 def format_result(r: dict) -> str:

@@ -135,7 +135,7 @@ def summarise(results: list) -> dict:
 def main(argv=None) -> int:
     from sim.cli import parse_with_logging
 
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(prog="python -m sim.physics_windows", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--log", action="append", help="log name or path (repeatable); default megalphian and royalejandro")
     p.add_argument("--every", type=int, default=DEFAULT_EVERY, help="a window starts every N rows")
     p.add_argument("--out", default="out/physics-windows", help="folder for metrics.json")

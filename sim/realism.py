@@ -251,7 +251,7 @@ def _write_json(path: Path, payload: dict):
 def main(argv=None):
     from sim.cli import parse_with_logging
 
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(prog="python -m sim.realism", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--log", default="test_dataset", help="test_dataset, a real-logs folder name, a log folder or csv")
     parser.add_argument("--stride", type=int, default=1, help="use every N-th frame")
     parser.add_argument("--shadows", choices=("off", "on", "both"), default="off",

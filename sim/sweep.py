@@ -246,7 +246,7 @@ def sweep(specs, seeds, world="default", shadows=False, time_limit=TIME_LIMIT_S,
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description="Sweep module constants x seeds on the twin (local processes or Dask).")
+    p = argparse.ArgumentParser(prog="python -m sim.sweep", description="Sweep module constants x seeds on the twin (local processes or Dask).")
     p.add_argument("specs", nargs="+", metavar="MODULE.CONSTANT=v1,v2,...",
                    help="e.g. perception.NAV_MAJORITY=0.15,0.2,0.25 (several: every combination)")
     p.add_argument("--seeds", default="0-19", help="e.g. 0-19 or 1,5,9")

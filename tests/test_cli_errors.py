@@ -181,7 +181,12 @@ def test_ctrl_c_in_a_mission_writes_the_partial_mission(tmp_path):
     saved = json.loads((tmp_path / "mission.json").read_text())
     assert r["end_reason"] == saved["end_reason"] == mission.INTERRUPTED
     assert 40 <= saved["frames"] <= 60
-    assert (tmp_path / "mission.png").exists() and (tmp_path / "timeline.npz").exists()
+    assert (tmp_path / "timeline.npz").exists()
+    assert saved["time_limit_s"] == 300 and saved["code_version"] and saved["timing"] and saved["seed"] == 1
+    import cv2
+
+    png = cv2.imread(str(tmp_path / "mission.png"))
+    assert png.shape[1] == 800 and png.shape[0] > 800  # the map plus a title with the figures and a legend
 
 
 def test_ctrl_c_in_an_evaluation_keeps_finished_and_partial_missions(monkeypatch, tmp_path):
