@@ -134,3 +134,29 @@ class Browser:
                     self.proc.kill()
                     self.proc.wait(10)
             shutil.rmtree(self.profile, ignore_errors=True)
+
+
+def main(argv=None) -> int:
+    """``python -m dashboard.browser URL OUT.png [--after-s T]``: screenshot a dashboard page
+    (for the README) once the mission shown has reached T simulated seconds."""
+    from sim.cli import positive_number, tool_parser
+
+    p = tool_parser("python -m dashboard.browser", "Screenshot a dashboard page with headless Chromium.")
+    p.add_argument("url", help="the page, e.g. http://127.0.0.1:4568/")
+    p.add_argument("out", help="PNG file to write")
+    p.add_argument("--after-s", type=positive_number, default=None, metavar="SECONDS",
+                   help="wait until the page shows at least this mission time")
+    p.add_argument("--timeout", type=positive_number, default=3600.0, help="give up after this many wall s")
+    a = p.parse_args(argv)
+    with Browser() as b:
+        b.open(a.url)
+        b.wait_for("Number(document.body.dataset.version) > 0", a.timeout)
+        if a.after_s:
+            b.wait_for(f"Number(document.getElementById('fig-t').dataset.value) >= {a.after_s}", a.timeout, 1.0)
+        time.sleep(1.0)  # let the images of the last message decode
+        print(b.screenshot(a.out))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
