@@ -17,8 +17,10 @@ from rover_gym.env import PICKUP_THRESHOLD, TELEMETRY_FIELDS
 PNG_COMPRESSION = 1  # cv2 PNG level: fast; lossless at every level
 
 
-def telemetry_from_obs(obs) -> dict:
-    """The simulator-format telemetry dict for an env observation (sample positions left empty)."""
+def telemetry_from_obs(obs, sim_time_field: bool = True) -> dict:
+    """The simulator-format telemetry dict for an env observation (sample positions left empty).
+
+    sim_time_field: add the twin-only `sim_time` clock (the lockstep loop sends it; the real one does not)."""
     import cv2
 
     from sim.twin import format_angle_0_360, format_n
@@ -28,7 +30,7 @@ def telemetry_from_obs(obs) -> dict:
                            [cv2.IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
     if not ok:
         raise ValueError("cannot encode the observed image as PNG")
-    return {
+    tel = {
         "steering_angle": format_n(t["steer"]), "throttle": format_n(t["throttle"]),
         "brake": format_n(t["brake"]), "speed": format_n(t["speed"]),
         "position": f"{format_n(t['x'])};{format_n(t['y'])}",
@@ -37,8 +39,10 @@ def telemetry_from_obs(obs) -> dict:
         "near_sample": str(int(round(t["near_sample"]))), "picking_up": str(int(round(t["picking_up"]))),
         "sample_count": str(int(round(t["samples_remaining"]))), "samples_x": "", "samples_y": "",
         "image": base64.b64encode(png.tobytes()).decode("ascii"),
-        "sim_time": f"{t['sim_time']:.4f}",
     }
+    if sim_time_field:
+        tel["sim_time"] = f"{t['sim_time']:.4f}"
+    return tel
 
 
 def action_from_reply(event: str, payload: dict) -> np.ndarray:
@@ -52,20 +56,37 @@ def action_from_reply(event: str, payload: dict) -> np.ndarray:
 
 
 class AutonomyPolicy:
-    """`autonomy.AutonomyClient` behind `policy(obs) -> action`; `reset()` before a new episode."""
+    """`autonomy.AutonomyClient` behind `policy(obs) -> action`; `reset()` before a new episode.
 
-    def __init__(self, ground_truth=None, home_by_s=None):
+    clock: the client's wall clock (a callable, seconds); None = the observation's capture time,
+    sent as the lockstep loop's `sim_time` field.  `AutonomyPolicy.for_env(env)` takes both from
+    the env's timing: under unity timing no clock is sent and the client reads the env's
+    `client_clock` (capture time + half the round trip), exactly as in `sim.mission`.
+    """
+
+    def __init__(self, ground_truth=None, home_by_s=None, clock=None):
         self.ground_truth = ground_truth
         self.home_by_s = home_by_s
+        self.clock = clock
         self.reset()
 
+    @classmethod
+    def for_env(cls, env, home_by_s=None):
+        e = env.unwrapped
+        return cls(ground_truth=e.world.nav_truth, home_by_s=home_by_s,
+                   clock=None if e.timing.sends_sim_time else e.client_clock)
+
     def reset(self) -> None:
+        import time
+
         from autonomy import AutonomyClient
 
-        self.client = AutonomyClient(ground_truth=self.ground_truth, insets=False, home_by_s=self.home_by_s)
+        self.client = AutonomyClient(ground_truth=self.ground_truth, insets=False, home_by_s=self.home_by_s,
+                                     clock=self.clock or time.monotonic)
 
     def __call__(self, obs) -> np.ndarray:
-        event, payload = self.client.handle_telemetry(telemetry_from_obs(obs))
+        tel = telemetry_from_obs(obs, sim_time_field=self.clock is None)
+        event, payload = self.client.handle_telemetry(tel)
         action = action_from_reply(event, payload)
         assert event != "pickup" or action[3] >= PICKUP_THRESHOLD
         return action

@@ -16,11 +16,11 @@ from pathlib import Path
 
 log = logging.getLogger(__name__)
 
-DEFAULT_STEPS = 1500  # env steps (0.04 s each in lockstep timing: 60 s of simulated time)
+DEFAULT_STEPS = 1500  # env steps (one 1/30 s render frame each under unity timing, 0.04 s under lockstep)
 DEFAULT_OUT = "out/gym-demo.png"  # where the final render() image goes
 
 
-def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=False, timing="lockstep", progress=True):
+def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=False, timing="unity", progress=True):
     """Run the baseline for up to `steps` steps; returns (summary dict, final render image)."""
     import gymnasium
     from tqdm import tqdm
@@ -30,7 +30,7 @@ def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=False, timing
 
     env = gymnasium.make(rover_gym.ENV_ID, world=world, seed=seed, timing=timing, shadows=shadows,
                          render_mode="rgb_array")
-    policy = AutonomyPolicy(ground_truth=env.unwrapped.world.nav_truth)
+    policy = AutonomyPolicy.for_env(env)
     obs, info = env.reset()
     total, n = 0.0, 0
     terminated = truncated = False
@@ -44,7 +44,8 @@ def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=False, timing
     from evaluation.metrics import score_map
 
     client_map = score_map(policy.worldmap, env.unwrapped.world.nav_truth)
-    summary = {"steps": n, "sim_time_s": round(info["sim_time"], 2), "reward": round(total, 2),
+    summary = {"timing": env.unwrapped.timing.model, "steps": n, "sim_time_s": round(info["sim_time"], 2),
+               "reward": round(total, 2),
                "seen_truth_pct": round(info["seen_truth_pct"], 1),
                "client_mapped_pct": round(client_map.mapped_pct, 1), "client_fidelity_pct": round(client_map.fidelity_pct, 1),
                "collected": info["collected"],
@@ -55,13 +56,15 @@ def run_demo(steps=DEFAULT_STEPS, world="default", seed=0, shadows=False, timing
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m rover_gym.demo", description="Baseline policy in the RoverTwin-v0 Gymnasium env.")
-    p.add_argument("--steps", type=int, default=DEFAULT_STEPS, help="env steps (0.04 s each)")
+    p.add_argument("--steps", type=int, default=DEFAULT_STEPS, help="env steps (one render frame each)")
     p.add_argument("--world", default="default", help="real | procedural:K | PATH.png")
     p.add_argument("--seed", type=int, default=0, help="scene seed")
     from sim.cli import add_shadows_option
 
     add_shadows_option(p)
-    p.add_argument("--timing", choices=("lockstep", "unity"), default="lockstep")
+    from sim.timing import add_timing_options, timing_from_args
+
+    add_timing_options(p)
     p.add_argument("--out", default=DEFAULT_OUT, help="PNG of the final render()")
     p.add_argument("--no-progress", action="store_true")
     from sim.cli import parse_with_logging
@@ -70,7 +73,8 @@ def main(argv=None) -> int:
     if a.steps <= 0:
         p.error("--steps must be positive")
     try:
-        summary, image = run_demo(a.steps, a.world, a.seed, a.shadows == "on", a.timing, not a.no_progress)
+        summary, image = run_demo(a.steps, a.world, a.seed, a.shadows == "on", timing_from_args(a),
+                                  not a.no_progress)
     except (ValueError, FileNotFoundError, NotImplementedError) as exc:
         log.error("%s", exc)
         return 2

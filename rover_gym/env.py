@@ -21,7 +21,7 @@ HOME_REWARD = 50.0  # reward for stopping at home with every sample collected (e
 HOME_RADIUS_M = 3.0  # m from the start that counts as home (as sim.mission)
 HOME_STILL_SPEED = 0.1  # m/s, below this the rover counts as stopped at home
 EPISODE_S = 900.0  # simulated seconds before an episode is truncated (as sim.mission)
-TIMINGS = ("lockstep", "unity")  # accepted `timing` arguments
+SIM_TIME_DECIMALS = 4  # obs sim_time rounding (as the twin's lockstep sim_time field)
 RENDER_MAP_PX = 320  # side of the map panel in render(), px (camera + text panel on its left)
 
 _WORLDS: dict = {}  # (spec, shadows) -> World, shared by every env in this process (bakes are costly)
@@ -49,8 +49,10 @@ def _num(text) -> float:
     return float(str(text).replace(",", ""))
 
 
-def telemetry_vector(tel: dict) -> np.ndarray:
-    """The env's telemetry observation from the simulator's string telemetry (same rounding)."""
+def telemetry_vector(tel: dict, sim_time: float) -> np.ndarray:
+    """The env's telemetry observation from the simulator's string telemetry (same rounding).
+
+    sim_time: when this telemetry was captured, s (the real simulator sends no clock)."""
     x, y = (_num(v) for v in tel["position"].split(";"))
     values = {
         "speed": _num(tel["speed"]), "x": x, "y": y, "yaw": _num(tel["yaw"]) % 360.0,
@@ -58,7 +60,7 @@ def telemetry_vector(tel: dict) -> np.ndarray:
         "steer": _num(tel["steering_angle"]), "throttle": _num(tel["throttle"]),
         "brake": _num(tel["brake"]), "near_sample": float(tel["near_sample"]),
         "picking_up": float(tel["picking_up"]), "samples_remaining": float(tel["sample_count"]),
-        "sim_time": _num(tel.get("sim_time", "0")),
+        "sim_time": round(float(sim_time), SIM_TIME_DECIMALS),
     }
     return np.array([values[k] for k in TELEMETRY_FIELDS], np.float64)
 
@@ -121,7 +123,8 @@ class RoverTwinEnv(gym.Env):
       its rounding (4 decimals): speed (m/s, negative in reverse), x, y (m),
       yaw (deg 0..360, CCW from east), pitch, roll (deg, signed, pitch + = nose
       down), steer, throttle, brake (last command), near_sample, picking_up (0/1),
-      samples_remaining, sim_time (s).  Order in `TELEMETRY_FIELDS`.
+      samples_remaining, sim_time (s, when the frame was captured; the real
+      simulator sends no clock, a client has its own).  Order in `TELEMETRY_FIELDS`.
 
     The real simulator also sends the remaining samples' positions; the env
     leaves them out (a policy that reads them would not need to find samples).
@@ -157,16 +160,22 @@ class RoverTwinEnv(gym.Env):
 
     ## Arguments
 
-    `gymnasium.make("RoverTwin-v0", world="default", seed=None, timing="lockstep",
-    shadows=False, render_mode=None, max_episode_s=900.0, pickup_guard=True)`
+    `gymnasium.make("RoverTwin-v0", world="default", seed=None, timing="unity",
+    shadows=False, render_mode=None, max_episode_s=900.0, pickup_guard=True,
+    fps=None, latency_ms=None, compute_ms=None)`
 
     * `world`: `"real"` (../shared world), `"procedural:K"`, a navigable-map PNG
       path, `"default"` (real when present) or a `sim.world.World`.
     * `seed`: scene seed of the first `reset()` without a seed.
-    * `timing`: `"lockstep"`: every step is one 0.04 s simulator frame (two
-      0.02 s physics steps), like `RoverTwin.step`; `"unity"`: the Unity timing
-      model (free-running physics, frame-paced telemetry, latency) when the twin
-      offers it.
+    * `timing`: `"unity"` (default): the real simulator's loop (sim/timing.py):
+      physics runs on while the agent "thinks"; its action reaches the simulator
+      `compute_ms + latency_ms` after the frame it answers (2 + 5 ms by default)
+      and acts at the next render frame (`fps`, 30 by default), where the next
+      observation is captured: one step is one render frame (1/30 s), and the
+      rover moves on the action from the next observation on.  `"lockstep"`: the twin's
+      easier debugging loop, every step applies the action and advances one
+      0.04 s frame (two 0.02 s physics steps) at once.  A `sim.timing.Timing`
+      is accepted too; `fps`, `latency_ms`, `compute_ms` override its defaults.
     * `shadows`: terrain cast shadows (the simulator's Simple..Fantastic quality)
       or none (Fastest/Fast, the default, as the held-out real drives show).
     * `render_mode`: `"rgb_array"`: `render()` returns a (320, 640, 3) image: the
@@ -174,28 +183,27 @@ class RoverTwinEnv(gym.Env):
       seen so far (blue) and the rover's path.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
-    def __init__(self, world="default", seed: int | None = None, timing: str = "lockstep",
+    def __init__(self, world="default", seed: int | None = None, timing="unity",
                  shadows: bool = False, render_mode: str | None = None, max_episode_s: float = EPISODE_S,
-                 pickup_guard: bool = True, seen_range_m: float = SEEN_RANGE_M):
+                 pickup_guard: bool = True, seen_range_m: float = SEEN_RANGE_M, fps: float | None = None,
+                 latency_ms: float | None = None, compute_ms: float | None = None):
+        from sim.timing import TwinLoop
         from sim.twin import RoverTwin
 
-        if timing not in TIMINGS:
-            raise ValueError(f"timing must be one of {TIMINGS}, not {timing!r}")
+        self.timing = make_timing(timing, fps, latency_ms, compute_ms)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', not {render_mode!r}")
         if not (max_episode_s > 0 and math.isfinite(max_episode_s)):
             raise ValueError(f"max_episode_s must be a positive number of seconds, not {max_episode_s!r}")
         self.world = load_env_world(world, shadows)
-        self.timing = timing
-        self._stepper = _make_stepper(timing)
         self.render_mode = render_mode
         self.max_episode_s = float(max_episode_s)
         self.pickup_guard = bool(pickup_guard)
         self._first_seed = None if seed is None else int(seed)
-        self.twin = RoverTwin(self.world, seed=self._first_seed or 0, render=True,
-                              sim_time_field=True)  # one env step = one lockstep frame; obs carry its clock
+        self.twin = RoverTwin(self.world, seed=self._first_seed or 0, render=True)
+        self._loop = TwinLoop(self.twin, self.timing)  # sends sim_time in telemetry only under lockstep
         self.coverage = CameraCoverage(self.world.nav_truth, seen_range_m)
         self.action_space = spaces.Box(np.array([-1.0, 0.0, -MAX_STEER_DEG, 0.0], np.float32),
                                        np.array([1.0, MAX_BRAKE, MAX_STEER_DEG, 1.0], np.float32),
@@ -217,7 +225,7 @@ class RoverTwinEnv(gym.Env):
         super().reset(seed=seed)
         scene = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
         self.scene_seed = scene
-        self._tel = self.twin.reset(scene)
+        self._tel = self._loop.reset(scene)
         self._image = _decode_jpeg(self.twin.last_jpeg)
         self.coverage.reset()
         self._see()  # the first view is free: reward only what the agent's driving reveals
@@ -230,7 +238,7 @@ class RoverTwinEnv(gym.Env):
         if self._tel is None:
             raise RuntimeError("call reset() before step()")
         event, payload = self._command(action)
-        self._tel = self._stepper(self.twin, event, payload)
+        self._tel, _ = self._loop.step(event, payload)  # our commands always parse: no CommandError
         self._image = _decode_jpeg(self.twin.last_jpeg)
         truth = self.twin.truth
         self._trail.append((truth.x, truth.y))
@@ -256,7 +264,7 @@ class RoverTwinEnv(gym.Env):
         if self.render_mode != "rgb_array" or self._image is None:
             return None
         truth = self.twin.truth
-        lines = (f"{self.world.name}  scene {self.scene_seed}  t = {truth.sim_time:.1f} s",
+        lines = (f"{self.world.name}  scene {self.scene_seed}  t = {truth.sim_time:.1f} s  {self.timing.model}",
                  f"floor seen: {self.coverage.seen_truth_pct:.1f} % of the truth map",
                  f"samples collected: {len(truth.collected)} / {len(truth.initial_samples)}",
                  f"speed {truth.v:.2f} m/s  episode reward {self._return:.1f}")
@@ -290,7 +298,7 @@ class RoverTwinEnv(gym.Env):
                 and math.hypot(truth.x - truth.start_xy[0], truth.y - truth.start_xy[1]) <= HOME_RADIUS_M)
 
     def _obs(self):
-        return {"image": self._image, "telemetry": telemetry_vector(self._tel)}
+        return {"image": self._image, "telemetry": telemetry_vector(self._tel, self._loop.captured_at)}
 
     def _info(self, end_reason: str) -> dict:
         truth = self.twin.truth
@@ -300,18 +308,30 @@ class RoverTwinEnv(gym.Env):
                 "end_reason": end_reason}
 
     @property
+    def client_clock(self):
+        """What a client's wall clock reads when it gets the last observation (unity: capture + half the
+        round trip; lockstep: the capture time), for policies that want one (`AutonomyPolicy.for_env`)."""
+        return self._loop.clock
+
+    @property
     def telemetry(self) -> dict:
         """The simulator-format telemetry of the last step (strings, base64 JPEG)."""
         return self._tel
 
 
-def _make_stepper(timing: str):
-    """step(twin, event, payload) -> telemetry for a timing model."""
-    if timing == "lockstep":
-        return lambda twin, event, payload: twin.step(event, payload)
-    raise NotImplementedError(
-        "timing='unity' needs the twin's Unity timing loop, which this checkout does not have yet; "
-        "use timing='lockstep'")
+def make_timing(timing="unity", fps=None, latency_ms=None, compute_ms=None):
+    """A sim.timing.Timing from a model name (or a Timing) and optional parameter overrides."""
+    from dataclasses import replace
+
+    from sim.timing import TIMING_MODELS, Timing
+
+    if not isinstance(timing, Timing):
+        if timing not in TIMING_MODELS:
+            raise ValueError(f"timing must be one of {TIMING_MODELS} or a sim.timing.Timing, not {timing!r}")
+        timing = Timing(model=timing)
+    overrides = {k: float(v) for k, v in (("fps", fps), ("latency_ms", latency_ms), ("compute_ms", compute_ms))
+                 if v is not None}
+    return replace(timing, **overrides) if overrides else timing
 
 
 def render_panel(image, nav_truth, seen, trail, lines=()) -> np.ndarray:

@@ -52,6 +52,7 @@ class MissionTask:
     home_by: float | None = None
     client: str | None = None  # a third-party drive_rover.py (its own process, on the wire); None = ours in-process
     constants: tuple = ()  # (("module.NAME", value), ...) set before the client is built
+    timing: dict | None = None  # sim.timing.Timing fields (model, fps, latency_ms, compute_ms); None = Timing()
     keep_files: bool = True  # ship mission.png / worldmap.npy back
     fingerprint: str | None = None  # the caller's code fingerprint; a worker with other code says so
     extra: dict = field(default_factory=dict)  # labels the caller wants back (e.g. the sweep combination)
@@ -157,16 +158,25 @@ def run_task(task: MissionTask) -> dict:
     return {"result": result, "files": files, "task": task.as_dict()}
 
 
+def task_timing(task: MissionTask):
+    from sim.timing import Timing
+
+    return Timing(**task.timing) if task.timing else Timing()
+
+
 def _run_mission(task: MissionTask, world, out: str) -> dict:
+    timing = task_timing(task)
     if task.client:
         from sim.any_client import run_client_mission
 
+        if not timing.unity:  # such clients time themselves with the wall clock: only the real-time loop fits
+            raise ValueError("a third-party client runs under unity timing only (over the wire, in real time)")
         return run_client_mission(world, task.seed, task.client, time_limit=task.time_limit, out=out,
-                                  progress=False, write_files=task.keep_files)
+                                  progress=False, write_files=task.keep_files, fps=timing.fps)
     from sim.mission import run_mission
 
     return run_mission(task.seed, world, task.time_limit, out=out, progress=False, home_by=task.home_by,
-                       write_files=task.keep_files)
+                       write_files=task.keep_files, timing=timing)
 
 
 def _quiet_worker():
@@ -275,8 +285,17 @@ def add_scheduler_option(parser) -> None:
                         help="run each mission as a task on this Dask scheduler instead of local processes")
 
 
+def timing_fields(timing) -> dict | None:
+    """A Timing as the plain dict a MissionTask carries (None for the default)."""
+    if timing is None:
+        return None
+    from dataclasses import asdict as dc_asdict
+
+    return dc_asdict(timing)
+
+
 def evaluate_tasks(seeds, world_spec="default", jobs=2, time_limit=900.0, out="out/evaluation", progress=True,
-                   shadows=False, home_by=None, client=None, scheduler=None) -> dict:
+                   shadows=False, home_by=None, client=None, scheduler=None, timing=None) -> dict:
     """sim.evaluate on a backend (local processes or Dask) and/or for a third-party client.
 
     Same outputs as `sim.evaluate.evaluate`: per-seed folders, evaluation.{json,csv,md}.
@@ -290,18 +309,26 @@ def evaluate_tasks(seeds, world_spec="default", jobs=2, time_limit=900.0, out="o
         log.info("third-party client missions run in real time: about %.0f s of wall time per seed at most",
                  time_limit)
     fp = code_fingerprint()
+    from sim.timing import Timing
+
+    timing = timing or Timing()
+    if client and not timing.unity:
+        raise ValueError("--client runs under unity timing only (the client times itself with the wall clock)")
     tasks = [MissionTask(seed=s, world=world_spec, shadows=shadows, time_limit=time_limit, home_by=home_by,
-                         client=client, fingerprint=fp) for s in seeds]
+                         client=client, timing=timing_fields(timing), fingerprint=fp) for s in seeds]
     out = Path(out)
     t0 = time.perf_counter()
     results = [store_answer(a, out / f"seed-{a['result']['seed']}")
                for a in run_tasks(tasks, scheduler=scheduler, jobs=jobs, progress=progress)]
     results.sort(key=lambda r: r["seed"])
-    summary = summarise([r for r in results if "mapped_pct" in r])
+    done = [r for r in results if "mapped_pct" in r]
+    summary = summarise(done)
     world_name = next((r.get("world") for r in results if r.get("world")), world_spec)
     meta = {"world": world_name, "seeds": f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0]),
-            "count": len(seeds), "shadows": "on" if shadows else "off", "jobs": jobs, "time_limit_s": time_limit,
-            "home_by_s": home_by, "client": client, "backend": scheduler or "local",
-            "code": fp, "wall_s": round(time.perf_counter() - t0, 1)}
+            "count": len(seeds), "finished": len(done), "shadows": "on" if shadows else "off", "jobs": jobs,
+            "time_limit_s": time_limit, "home_by_s": home_by, **timing.describe(), "client": client,
+            "backend": scheduler or "local", "code": fp, "interrupted": False,
+            "failed": sum(str(r.get("end_reason", "")).startswith("error") for r in results),
+            "wall_s": round(time.perf_counter() - t0, 1)}
     md = write_outputs(out, results, summary, meta)
     return {"meta": meta, "summary": summary, "missions": results, "markdown": md}

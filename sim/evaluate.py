@@ -490,13 +490,12 @@ def main(argv=None) -> int:
         return INTERRUPTED_EXIT if res["interrupted"] else 0
     log.info("timing: %s", timing.label())
     if a.client or a.scheduler:  # another client and/or a Dask cluster: sim/backend.py
-        if timing != Timing():
-            p.error("--timing/--fps/--latency-ms/--compute-ms are not passed through sim/backend.py yet: "
-                    "with --scheduler/--client every mission runs the default (unity, 30 fps)")
+        if a.client and not timing.unity:
+            p.error("--client runs under unity timing only: the client times itself with the wall clock")
         try:
             res = evaluate_tasks(seeds, a.world, a.jobs, a.time_limit, a.out, progress=not a.no_progress,
                                  shadows=a.shadows == "on", home_by=a.home_by, client=a.client,
-                                 scheduler=a.scheduler)
+                                 scheduler=a.scheduler, timing=timing)
         except (ValueError, FileNotFoundError) as exc:
             log.error("%s", exc)
             return 2

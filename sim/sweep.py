@@ -3,7 +3,7 @@
     python -m sim.sweep perception.NAV_MAJORITY=0.15,0.2,0.25 --seeds 0-19
                         [MODULE.CONSTANT=v1,v2 ...] [--world SPEC] [--shadows on|off]
                         [--time-limit S] [--home-by S] [--jobs 2] [--scheduler tcp://HOST:8786]
-                        [--out out/sweep]
+                        [--timing unity|lockstep ...] [--out out/sweep]
 
 Every combination of the listed values (a cartesian product when several
 constants are given) runs one full in-process mission per seed, on local worker
@@ -36,10 +36,12 @@ from pathlib import Path
 import numpy as np
 
 from drive_rover import add_home_by_option
-from sim.backend import MissionTask, add_scheduler_option, code_fingerprint, resolve_constant, run_tasks
+from sim.backend import (MissionTask, add_scheduler_option, code_fingerprint, resolve_constant, run_tasks,
+                         timing_fields)
 from sim.cli import add_shadows_option, parse_with_logging
 from sim.evaluate import parse_seeds
-from sim.mission import TIME_LIMIT_S
+from sim.mission import TIME_LIMIT_S, timing_label
+from sim.timing import Timing, add_timing_options, timing_from_args
 
 log = logging.getLogger(__name__)
 
@@ -109,12 +111,13 @@ def same_value(a, b) -> bool:
 
 
 # ----------------------------------------------------------------------------- running
-def build_tasks(names, value_lists, seeds, world, shadows, time_limit, home_by):
+def build_tasks(names, value_lists, seeds, world, shadows, time_limit, home_by, timing=None):
     """(combinations, tasks): every value combination x every seed."""
     combos = list(itertools.product(*value_lists))
     fp = code_fingerprint()
     tasks = [MissionTask(seed=s, world=world, shadows=shadows, time_limit=time_limit, home_by=home_by,
                          constants=tuple(zip(names, combo)), keep_files=False, fingerprint=fp,
+                         timing=timing_fields(timing),
                          extra={"combo": i})
              for i, combo in enumerate(combos) for s in seeds]
     return combos, tasks
@@ -205,7 +208,7 @@ def _write_text_atomic(path: Path, text: str):
 
 
 def sweep(specs, seeds, world="default", shadows=False, time_limit=TIME_LIMIT_S, home_by=None, jobs=DEFAULT_JOBS,
-          scheduler=None, out=DEFAULT_OUT, progress=True) -> dict:
+          scheduler=None, out=DEFAULT_OUT, progress=True, timing=None) -> dict:
     """Run the sweep and write its outputs; returns {"meta", "rows", "missions", "markdown"}."""
     from sim.mission import write_json_atomic
 
@@ -214,7 +217,8 @@ def sweep(specs, seeds, world="default", shadows=False, time_limit=TIME_LIMIT_S,
     if len(set(names)) != len(names):
         raise ValueError("each constant may be listed once")
     currents = [p[2] for p in parsed]
-    combos, tasks = build_tasks(names, [p[1] for p in parsed], seeds, world, shadows, time_limit, home_by)
+    timing = timing or Timing()
+    combos, tasks = build_tasks(names, [p[1] for p in parsed], seeds, world, shadows, time_limit, home_by, timing)
     t0 = time.perf_counter()
     grouped = [[] for _ in combos]
     for answer in run_tasks(tasks, scheduler=scheduler, jobs=jobs, progress=progress, desc="sweep"):
@@ -225,9 +229,10 @@ def sweep(specs, seeds, world="default", shadows=False, time_limit=TIME_LIMIT_S,
     out = Path(out)
     md = markdown(names, combos, rows, currents)
     seeds_text = f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
-    title = f"sweep on {world}, seeds {seeds_text}, time limit {time_limit:.0f} s, shadows {'on' if shadows else 'off'}"
+    title = (f"sweep on {world}, seeds {seeds_text}, time limit {time_limit:.0f} s, shadows {'on' if shadows else 'off'}, "
+             f"{timing_label(timing.describe())}")
     meta = {"constants": names, "current_values": [_label(c) for c in currents], "seeds": seeds_text, "world": world,
-            "shadows": shadows, "time_limit_s": time_limit, "home_by_s": home_by, "backend": scheduler or "local",
+            "shadows": shadows, "time_limit_s": time_limit, "home_by_s": home_by, **timing.describe(), "backend": scheduler or "local",
             "code": code_fingerprint(), "wall_s": round(time.perf_counter() - t0, 1)}
     _write_text_atomic(out / "sweep.md", f"# {title}\n\n{md}")
     buf = io.StringIO()
@@ -257,10 +262,12 @@ def main(argv=None) -> int:
     add_home_by_option(p)
     add_shadows_option(p)
     add_scheduler_option(p)
+    add_timing_options(p)
     p.add_argument("--no-progress", action="store_true")
     a = parse_with_logging(p, argv)
     try:
         seeds = parse_seeds(a.seeds)
+        timing = timing_from_args(a)
         for spec in a.specs:
             parse_spec(spec)
     except ValueError as exc:
@@ -272,7 +279,7 @@ def main(argv=None) -> int:
 
         load_world(a.world)  # fail early and clearly on a bad --world
         res = sweep(a.specs, seeds, a.world, a.shadows == "on", a.time_limit, a.home_by, a.jobs, a.scheduler,
-                    a.out, progress=not a.no_progress)
+                    a.out, progress=not a.no_progress, timing=timing)
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2

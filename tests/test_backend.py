@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from sim.backend import MissionTask, comparable, constants_set, evaluate_tasks, resolve_constant, run_task
+from sim.backend import (MissionTask, comparable, constants_set, evaluate_tasks, resolve_constant, run_task,
+                         timing_fields)
 
 WORLD = "procedural:0"  # needs no ../shared
 TIME_LIMIT_S = 4.0  # simulated seconds per mission: enough to move, cheap in CI
@@ -46,3 +47,14 @@ def test_a_failing_mission_comes_back_as_an_error_row():
     answer = run_task(MissionTask(seed=0, world="no-such-world.png", time_limit=1.0))
     assert answer["result"]["seed"] == 0 and answer["result"]["end_reason"].startswith("error:")
     assert answer["files"] == {}
+
+
+def test_the_timing_model_travels_with_the_task():
+    from sim.timing import Timing
+
+    lock = run_task(MissionTask(seed=0, world=WORLD, time_limit=1.0, keep_files=False,
+                                timing=timing_fields(Timing("lockstep"))))["result"]
+    unity = run_task(MissionTask(seed=0, world=WORLD, time_limit=1.0, keep_files=False,
+                                 timing=timing_fields(Timing("unity", fps=20.0))))["result"]
+    assert lock["timing"] == "lockstep" and unity["timing"] == "unity" and unity["fps"] == 20.0
+    assert lock["frames"] != unity["frames"]  # 0.04 s lockstep frames vs 0.05 s render frames

@@ -12,7 +12,7 @@ from rover_gym.env import HOME_REWARD, SAMPLE_REWARD, RoverTwinEnv
 from sim.samples import NEAR_AHEAD_M, PICKUP_DURATION_S
 from sim.world import World
 
-STEP_S = 0.04  # lockstep frame
+UNITY_STEP_S = 1 / 30  # one render frame at the default 30 fps
 
 
 def _flat_world(spots):
@@ -36,8 +36,9 @@ STOP = np.array([0.0, 1.0, 0.0, 0.0], np.float32)
 PICKUP = np.array([0.0, 0.0, 0.0, 1.0], np.float32)
 
 
-def test_make_registers_and_passes_check_env():
-    env = gymnasium.make(rover_gym.ENV_ID, world="procedural:0", seed=1, timing="lockstep", shadows=True,
+@pytest.mark.parametrize("timing", ["unity", "lockstep"])
+def test_make_registers_and_passes_check_env(timing):
+    env = gymnasium.make(rover_gym.ENV_ID, world="procedural:0", seed=1, timing=timing, shadows=True,
                          render_mode="rgb_array", max_episode_s=2.0)
     check_env(env.unwrapped)
     obs, info = env.reset(seed=5)
@@ -85,7 +86,7 @@ def test_sample_then_home_rewards_end_the_episode():
     total, terminated, steps = 0.0, False, 0
     obs, r, terminated, _, info = env.step(PICKUP)
     total += r
-    while not terminated and steps < PICKUP_DURATION_S / STEP_S + 10:
+    while not terminated and steps < PICKUP_DURATION_S / UNITY_STEP_S + 20:
         obs, r, terminated, _, info = env.step(STOP)
         total += r
         steps += 1
@@ -106,33 +107,35 @@ def test_blind_pickup_is_guarded_by_default_and_terminates_when_unguarded():
     assert terminated and "froze" in info["end_reason"]
 
 
-def test_baseline_policy_drives_exactly_like_the_client_on_the_twin():
-    """obs -> telemetry -> AutonomyClient: same commands, same path as sim.mission's loop."""
+@pytest.mark.parametrize("timing", ["unity", "lockstep"])
+def test_baseline_policy_drives_exactly_like_the_client_on_the_twin(timing):
+    """obs -> telemetry -> AutonomyClient: same commands, same path as sim.mission's loop (TwinLoop)."""
     from autonomy import AutonomyClient
+    from sim.timing import TwinLoop
     from sim.twin import RoverTwin
 
     frames = 120
-    env = RoverTwinEnv(world="procedural:0", seed=3)
-    policy = AutonomyPolicy(ground_truth=env.world.nav_truth)
+    env = RoverTwinEnv(world="procedural:0", seed=3, timing=timing)
+    policy = AutonomyPolicy.for_env(env)
     obs, _ = env.reset()
     gym_path = []
     for _ in range(frames):
         obs, *_ = env.step(policy(obs))
         gym_path.append(env.twin.pose())
 
-    twin = RoverTwin(env.world, seed=3, sim_time_field=True)  # lockstep, with the clock the env obs carry
-    client = AutonomyClient(ground_truth=env.world.nav_truth, insets=False)
-    tel = twin.reset(3)
+    loop = TwinLoop(RoverTwin(env.world, seed=3), env.timing)
+    client = AutonomyClient(ground_truth=env.world.nav_truth, insets=False, clock=loop.clock)
+    tel = loop.reset(3)
     twin_path = []
     for _ in range(frames):
-        tel = twin.step(*client.handle_telemetry(tel))
-        twin_path.append(twin.pose())
+        tel, _ = loop.step(*client.handle_telemetry(tel))
+        twin_path.append(loop.twin.pose())
     assert np.abs(np.array(twin_path)[-1, :2] - np.array(twin_path)[0, :2]).max() > 0.5  # it drove
     np.testing.assert_allclose(np.array(gym_path), np.array(twin_path), rtol=0, atol=1e-9)
 
 
 def test_telemetry_round_trip_keeps_the_simulator_strings():
-    env = RoverTwinEnv(world="procedural:0", seed=11)
+    env = RoverTwinEnv(world="procedural:0", seed=11, timing="lockstep")
     obs, _ = env.reset()
     for _ in range(30):
         obs, *_ = env.step(np.array([0.5, 0.0, 8.0, 0.0], np.float32))
@@ -141,3 +144,8 @@ def test_telemetry_round_trip_keeps_the_simulator_strings():
     for key in ("speed", "position", "pitch", "yaw", "roll", "steering_angle", "throttle", "brake",
                 "near_sample", "picking_up", "sample_count", "sim_time"):
         assert tel[key] == real[key], key
+    unity = RoverTwinEnv(world="procedural:0", seed=11, timing="unity", fps=20.0)
+    obs, _ = unity.reset()
+    obs, *_ = unity.step(np.array([0.5, 0.0, 8.0, 0.0], np.float32))
+    assert "sim_time" not in unity.telemetry  # the real simulator sends no clock
+    assert obs["telemetry"][-1] == pytest.approx(1 / 20.0, abs=1e-4)  # the frame it was captured at
