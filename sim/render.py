@@ -42,6 +42,7 @@ COARSE_CELL_M = 1.0  # empty-space-skipping cell size, m
 BLOCK_CELLS = 8  # coarse cells per side of the second skipping level (sky and far rays), count
 DARK_LUT_STEP_M = 0.02  # distance resolution of the distance-darkening table, m
 DARK_LUT_MAX_M = 200.0  # the table's reach (farther hits use its last entry), m
+SLAB_LO, SLAB_HI = 0, 1  # channels of the baked slab array (rock bottom, rock top), m
 WEIGHT_BITS = 13  # fixed-point bits of the colour blend weights (blend error < 0.1 grey level)
 LANE_BITS = 21  # bits per channel lane of a packed colour: 255 x 2**13 x (1 + rounding) fits
 GAP_MIN_M = 0.3  # rock bottom this far above the ground leaves a see-through gap, m
@@ -222,12 +223,19 @@ def bake_rasters(world: World):
     colour_rock = np.clip(rock_rgb * sun_shade(top)[..., None], 0, 255).astype(np.uint8)
     colour_rock = np.where(has_rock[..., None], colour_rock, colour_ground)
     kc = int(round(COARSE_CELL_M / cell))
-    cmax = _coarse_max(top, kc)
+    # the kernel marches the terrain on its own grid: bound each coarse cell by that grid's vertices
+    tmax, tmin = _terrain_cell_range(world.terrain_height, world.terrain_cell_m, COARSE_CELL_M,
+                                     cmax_shape := (n - 1) // kc)
+    cmax = np.maximum(_coarse_max(top, kc), tmax)
     # free band under overhangs per coarse cell: above every ground, below every rock bottom
-    cground = _coarse_max(ground, kc)
+    cground = np.maximum(_coarse_max(ground, kc), tmax)
     cbottom = -_coarse_max(-slab_lo, kc)  # lowest rock bottom (-1e9 solid rock, 1e9 open sky)
-    return {"cflat": _coarse_flat(ground, slab_hi, kc), "bmax": _block_max(cmax, BLOCK_CELLS),
-            "colour64": pack_rgb(colour_ground), "rock64": pack_rgb(colour_rock),
+    rock = _coarse_max(slab_hi, kc) > -1e8
+    # a level floor without rock: the kernel intersects such cells analytically
+    cflat = np.where((tmax == tmin) & ~rock, tmax, np.nan).astype(np.float32)
+    assert cflat.shape == (cmax_shape, cmax_shape)
+    return {"cflat": cflat, "bmax": _block_max(cmax, BLOCK_CELLS),
+            **_kernel_rasters(slab_lo, slab_hi, colour_ground), "rock64": pack_rgb(colour_rock),
             "top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
             "has_gap": has_gap, "colour": colour_ground, "colour_rock": colour_rock, "cmax": cmax,
             "cground": cground, "cbottom": cbottom,
@@ -246,13 +254,20 @@ def _coarse_max(top: np.ndarray, k: int) -> np.ndarray:
     return np.maximum(np.maximum(blocks, edge_r), edge_c).astype(np.float32)
 
 
-def _coarse_flat(ground: np.ndarray, slab_hi: np.ndarray, k: int) -> np.ndarray:
-    """Per coarse cell: the floor height where the whole cell (with the kernel's support) is one level
-    plane without rock, else NaN. The kernel intersects such cells analytically."""
-    gmax = _coarse_max(ground, k)
-    gmin = -_coarse_max(-ground, k)
-    rock = _coarse_max(slab_hi, k) > -1e8
-    return np.where((gmax == gmin) & ~rock, gmax, np.nan).astype(np.float32)
+def _terrain_cell_range(terrain: np.ndarray, tcell: float, coarse_m: float, cells: int):
+    """Max and min of the terrain's bilinear surface over each coarse cell: the extremes of a bilinear
+    patch are at its corners, so these are the extremes of the vertices of every patch the cell meets."""
+    n = terrain.shape[0] - 1
+    edges = np.arange(cells + 1) * coarse_m / tcell  # cell borders in terrain grid units
+    lo = np.clip(np.floor(edges[:-1]).astype(int), 0, n)
+    hi = np.clip(np.floor(edges[1:]).astype(int) + 1, 0, n)
+    t = terrain.astype(np.float32)
+    # along x, then along y
+    xmax = np.stack([t[:, a:b + 1].max(axis=1) for a, b in zip(lo, hi)], axis=1)
+    xmin = np.stack([t[:, a:b + 1].min(axis=1) for a, b in zip(lo, hi)], axis=1)
+    tmax = np.stack([xmax[a:b + 1].max(axis=0) for a, b in zip(lo, hi)], axis=0)
+    tmin = np.stack([xmin[a:b + 1].min(axis=0) for a, b in zip(lo, hi)], axis=0)
+    return tmax, tmin
 
 
 def _block_max(cmax: np.ndarray, cells: int) -> np.ndarray:
@@ -271,51 +286,12 @@ def _darkening_lut() -> np.ndarray:
 
 # ---------------------------------------------------------------------- marching
 @njit(cache=True, nogil=True, inline="always")
-def _top_at(top, inv_cell, x, y):
-    n = top.shape[0] - 1
-    fx = x * inv_cell
-    fy = y * inv_cell
-    if fx < 0.0:
-        fx = 0.0
-    elif fx > n - 1e-4:
-        fx = n - 1e-4
-    if fy < 0.0:
-        fy = 0.0
-    elif fy > n - 1e-4:
-        fy = n - 1e-4
-    c = int(fx)
-    r = int(fy)
-    tx = fx - c
-    ty = fy - r
-    return ((top[r, c] * (1 - tx) + top[r, c + 1] * tx) * (1 - ty)
-            + (top[r + 1, c] * (1 - tx) + top[r + 1, c + 1] * tx) * ty)
-
-
-@njit(cache=True, nogil=True, inline="always")
 def _nearest(n, inv_cell, v):
     f = v * inv_cell + 0.5
     if f < 0.0:
         return 0
     i = int(f)
     return i if i < n else n - 1
-
-
-@njit(cache=True, nogil=True)
-def _solid(ground, slab_lo, slab_hi, inv_cell, x, y, z):
-    """0 free, 1 terrain, 3 rock slab, 2 free under an overhanging slab.
-
-    Terrain is bilinear; rocks use the nearest 0.1 m cell (the world's own rule).
-    """
-    if z <= _top_at(ground, inv_cell, x, y):
-        return 1
-    n = ground.shape[0]
-    r = _nearest(n, inv_cell, y)
-    c = _nearest(n, inv_cell, x)
-    if z <= slab_hi[r, c]:
-        if z >= slab_lo[r, c]:
-            return 3
-        return 2
-    return 0
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -336,51 +312,92 @@ def _exit_dist(x, y, inv_hx, inv_hy, ci, ri, size):
 
 
 @njit(cache=True, nogil=True, fastmath=True)
-def _ray_table(rot, ray_a, ray_b, table):
-    """Per pixel (column-major) the ray's horizontal unit direction, slope and reciprocals.
+def _ray_column(rot, a, ray_b, col):
+    """Per row of one image column (x = a) the ray's horizontal unit direction, slope and reciprocals.
 
-    table[c, u, v]: 0 hx, 1 hy, 2 k = dz / |d_h|, 3 1/|d_h|, 4 1/hx, 5 1/hy (0 for a zero component),
-    6 |d| / |d_h| (distance per horizontal metre). One branch-free loop, so it vectorises.
+    col[c, v]: 0 hx, 1 hy, 2 k = dz / |d_h|, 3 1/|d_h|, 4 1/hx, 5 1/hy (0 for a zero component),
+    6 |d| / |d_h| (distance per horizontal metre). Branch-free, so it vectorises; one column at a
+    time so the table stays in L1 next to the march.
     """
-    for u in range(ray_a.shape[0]):
-        a = ray_a[u]
-        col_x = rot[0, 0] * a + rot[0, 2]
-        col_y = rot[1, 0] * a + rot[1, 2]
-        col_z = rot[2, 0] * a + rot[2, 2]
-        for v in range(ray_b.shape[0]):
-            b = ray_b[v]
-            dx = col_x + rot[0, 1] * b
-            dy = col_y + rot[1, 1] * b
-            dz = col_z + rot[2, 1] * b
-            hlen = max(math.sqrt(dx * dx + dy * dy), 1e-9)
-            inv_h = 1.0 / hlen
-            hx = dx * inv_h
-            hy = dy * inv_h
-            k = dz * inv_h
-            table[0, u, v] = hx
-            table[1, u, v] = hy
-            table[2, u, v] = k
-            table[3, u, v] = inv_h
-            table[4, u, v] = 1.0 / hx if abs(hx) > 1e-12 else 0.0
-            table[5, u, v] = 1.0 / hy if abs(hy) > 1e-12 else 0.0
-            table[6, u, v] = math.sqrt(1.0 + k * k)
+    col_x = rot[0, 0] * a + rot[0, 2]
+    col_y = rot[1, 0] * a + rot[1, 2]
+    col_z = rot[2, 0] * a + rot[2, 2]
+    for v in range(ray_b.shape[0]):
+        b = ray_b[v]
+        dx = col_x + rot[0, 1] * b
+        dy = col_y + rot[1, 1] * b
+        dz = col_z + rot[2, 1] * b
+        hlen = max(math.sqrt(dx * dx + dy * dy), 1e-9)
+        inv_h = 1.0 / hlen
+        hx = dx * inv_h
+        hy = dy * inv_h
+        k = dz * inv_h
+        col[0, v] = hx
+        col[1, v] = hy
+        col[2, v] = k
+        col[3, v] = inv_h
+        col[4, v] = 1.0 / hx if abs(hx) > 1e-12 else 0.0
+        col[5, v] = 1.0 / hy if abs(hy) > 1e-12 else 0.0
+        col[6, v] = math.sqrt(1.0 + k * k)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _bilinear_in(grid, inv_cell, x, y):
-    """Bilinear sample of a vertex grid at a point known to lie inside the world (no clamping)."""
-    fx = x * inv_cell
-    fy = y * inv_cell
+def _ground_in(terrain, inv_tcell, x, y):
+    """Bilinear terrain height at a point known to lie inside the world (no clamping).
+
+    Read from the world's own terrain grid (513 x 513, 1 MB): it stays in the CPU's cache, where
+    the 0.1 m resample (16 MB) did not; the surface is the same bilinear one."""
+    fx = x * inv_tcell
+    fy = y * inv_tcell
     c = int(fx)
     r = int(fy)
     tx = fx - c
     ty = fy - r
-    return ((grid[r, c] * (1 - tx) + grid[r, c + 1] * tx) * (1 - ty)
-            + (grid[r + 1, c] * (1 - tx) + grid[r + 1, c + 1] * tx) * ty)
+    return ((terrain[r, c] * (1 - tx) + terrain[r, c + 1] * tx) * (1 - ty)
+            + (terrain[r + 1, c] * (1 - tx) + terrain[r + 1, c + 1] * tx) * ty)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _ground_at(terrain, inv_tcell, x, y):
+    """Bilinear terrain height anywhere (clamped to the world)."""
+    n = terrain.shape[0] - 1
+    fx = min(max(x * inv_tcell, 0.0), n - 1e-6)
+    fy = min(max(y * inv_tcell, 0.0), n - 1e-6)
+    c = int(fx)
+    r = int(fy)
+    tx = fx - c
+    ty = fy - r
+    return ((terrain[r, c] * (1 - tx) + terrain[r, c + 1] * tx) * (1 - ty)
+            + (terrain[r + 1, c] * (1 - tx) + terrain[r + 1, c + 1] * tx) * ty)
+
+
+@njit(cache=True, nogil=True)
+def _solid_at(terrain, inv_tcell, slab, inv_cell, x, y, z):
+    """0 free, 1 terrain, 3 rock slab, 2 free under an overhanging slab.
+
+    Terrain is bilinear; rocks use the nearest 0.1 m cell (the world's own rule).
+    """
+    if z <= _ground_at(terrain, inv_tcell, x, y):
+        return 1
+    n = slab.shape[0]
+    r = _nearest(n, inv_cell, y)
+    c = _nearest(n, inv_cell, x)
+    if z <= slab[r, c, SLAB_HI]:
+        if z >= slab[r, c, SLAB_LO]:
+            return 3
+        return 2
+    return 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _spread(c):
+    """Packed 0xBBGGRR uint32 -> int64 with each channel in its own LANE_BITS-bit lane."""
+    c = np.int64(c)
+    return (c & 0xFF) | ((c & 0xFF00) << (LANE_BITS - 8)) | ((c & 0xFF0000) << (2 * LANE_BITS - 16))
 
 
 @njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
-def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64, cmax,
+def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, colour32, slab, rock64, cmax,
                    cground, cbottom, cflat, bmax, block_m, cell, coarse_m, origin,
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, world_size, dark_lut, dark_lut_step):
@@ -396,7 +413,7 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
     inv_cell = 1.0 / cell
     inv_coarse = 1.0 / coarse_m
     inv_block = 1.0 / block_m
-    n = ground.shape[0]
+    n = slab.shape[0]
     nc = cmax.shape[0]
     nb = bmax.shape[0]
     ox, oy, oz = origin[0], origin[1], origin[2]
@@ -406,7 +423,9 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
     half = 1 << (WEIGHT_BITS - 1)
     rounding = half | (half << LANE_BITS) | (half << (2 * LANE_BITS))
     wscale = float(1 << WEIGHT_BITS)
+    table = np.empty((7, h_img))
     for u in range(w_img):
+        _ray_column(rot, ray_a[u], ray_b, table)
         prev_s = 0.0  # where the ray below ended (hit, sky or far), horizontal m
         sky_rest = False
         # overhang passage of the ray below: first/last distance under a slab, lowest slab bottom
@@ -427,11 +446,11 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                     img[v, u, ch] = sky_rgb[ch]
                 depth[v, u] = np.inf
                 continue
-            hx = table[0, u, v]
-            hy = table[1, u, v]
-            k = table[2, u, v]
-            inv_hx = table[4, u, v]
-            inv_hy = table[5, u, v]
+            hx = table[0, v]
+            hy = table[1, v]
+            k = table[2, v]
+            inv_hx = table[4, v]
+            inv_hy = table[5, v]
             # Coherence: this ray is above the one below, so it is free wherever that ray was free
             # in open air; only where that ray passed under an overhang may this one hit earlier
             # (the underside), and only if it can climb to the overhang's bottom.
@@ -536,7 +555,7 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                         f_free = -1.0
                         continue
                     # fine step: terrain (bilinear) or the rock slab of the nearest 0.1 m cell
-                    g = _bilinear_in(ground, inv_cell, x, y)
+                    g = _ground_in(terrain, inv_tcell, x, y)
                     if z <= g:
                         state = 1
                         hit = 1
@@ -544,8 +563,8 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                     if rock_here:
                         rr = int(y * inv_cell + 0.5)
                         cc = int(x * inv_cell + 0.5)
-                        if z <= slab_hi[rr, cc]:
-                            lo_r = slab_lo[rr, cc]
+                        if z <= slab[rr, cc, SLAB_HI]:
+                            lo_r = slab[rr, cc, SLAB_LO]
                             if z >= lo_r:
                                 state = 3
                                 hit = 1
@@ -557,15 +576,15 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                             g_bottom = min(g_bottom, lo_r)
                 else:  # outside the world: its border continues (clamped lookups)
                     cell_end = -1.0
-                    g = _top_at(ground, inv_cell, x, y)
+                    g = _ground_at(terrain, inv_tcell, x, y)
                     if z <= g:
                         state = 1
                         hit = 1
                         break
                     rr = _nearest(n, inv_cell, y)
                     cc = _nearest(n, inv_cell, x)
-                    if z <= slab_hi[rr, cc]:
-                        lo_r = slab_lo[rr, cc]
+                    if z <= slab[rr, cc, SLAB_HI]:
+                        lo_r = slab[rr, cc, SLAB_LO]
                         if z >= lo_r:
                             state = 3
                             hit = 1
@@ -585,7 +604,7 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                     if f_free > 0.0:
                         f_lo = f_free
                     else:
-                        f_lo = (oz + lo * k) - _top_at(ground, inv_cell, ox + lo * hx, oy + lo * hy)
+                        f_lo = (oz + lo * k) - _ground_at(terrain, inv_tcell, ox + lo * hx, oy + lo * hy)
                     f_hi = z - g
                     if f_lo > 0.0 and f_hi <= 0.0 and f_lo - f_hi > 1e-9:
                         hi = lo + (hi - lo) * f_lo / (f_lo - f_hi)
@@ -593,7 +612,7 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                     # rock slab: bisection (nearest-cell slabs have vertical sides)
                     for _ in range(refine_iters):
                         mid = 0.5 * (lo + hi)
-                        st = _solid(ground, slab_lo, slab_hi, inv_cell, ox + mid * hx,
+                        st = _solid_at(terrain, inv_tcell, slab, inv_cell, ox + mid * hx,
                                     oy + mid * hy, oz + mid * k)
                         if st == 1 or st == 3:
                             hi = mid
@@ -604,7 +623,7 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                     x = ox + s * hx
                     y = oy + s * hy
                     z = oz + s * k
-                li = int(s * table[6, u, v] * inv_lut_step)
+                li = int(s * table[6, v] * inv_lut_step)
                 shade = dark_lut[li] if li < n_lut else dark_lut[n_lut - 1]
                 if state == 1:  # terrain: bilinear ground colour
                     fx = min(max(x * inv_cell, 0.0), n - 1 - 1e-4)
@@ -614,20 +633,21 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                     tx = fx - c0
                     ty = fy - r0
                     ws = wscale * shade
-                    acc = (colour64[r0, c0] * int((1.0 - tx) * (1.0 - ty) * ws + 0.5)
-                           + colour64[r0, c0 + 1] * int(tx * (1.0 - ty) * ws + 0.5)
-                           + colour64[r0 + 1, c0] * int((1.0 - tx) * ty * ws + 0.5)
-                           + colour64[r0 + 1, c0 + 1] * int(tx * ty * ws + 0.5) + rounding)
+                    acc = (_spread(colour32[r0, c0]) * int((1.0 - tx) * (1.0 - ty) * ws + 0.5)
+                           + _spread(colour32[r0, c0 + 1]) * int(tx * (1.0 - ty) * ws + 0.5)
+                           + _spread(colour32[r0 + 1, c0]) * int((1.0 - tx) * ty * ws + 0.5)
+                           + _spread(colour32[r0 + 1, c0 + 1]) * int(tx * ty * ws + 0.5)
+                           + rounding)
                 else:  # rock slab: nearest cell, darker on the underside of an overhang
                     rr = _nearest(n, inv_cell, y)
                     cc = _nearest(n, inv_cell, x)
-                    if -1e8 < slab_lo[rr, cc] < 1e8 and z < slab_lo[rr, cc] + 0.3:
+                    if -1e8 < slab[rr, cc, SLAB_LO] < 1e8 and z < slab[rr, cc, SLAB_LO] + 0.3:
                         shade *= underside_shade
                     acc = rock64[rr, cc] * int(wscale * shade + 0.5) + rounding
                 img[v, u, 0] = (acc >> WEIGHT_BITS) & lane_mask
                 img[v, u, 1] = (acc >> (WEIGHT_BITS + LANE_BITS)) & lane_mask
                 img[v, u, 2] = (acc >> (WEIGHT_BITS + 2 * LANE_BITS)) & lane_mask
-                depth[v, u] = s * table[3, u, v]
+                depth[v, u] = s * table[3, v]
                 prev_s = s
             elif hit == 2:
                 for ch in range(3):
@@ -640,6 +660,15 @@ def _render_kernel(img, depth, table, ground, slab_lo, slab_hi, colour64, rock64
                     img[v, u, ch] = far_rgb[ch]
                 depth[v, u] = np.inf
                 prev_s = far_m
+
+
+def _kernel_rasters(slab_lo, slab_hi, colour_ground) -> dict:
+    """The baked rasters as the kernel reads them: "colour32" uint32 (n, n) ground colour as 0xBBGGRR,
+    "slab" float32 (n, n, 2) rock bottom and top side by side (one cache line per lookup)."""
+    c = colour_ground.astype(np.uint32)
+    colour32 = c[..., 0] | (c[..., 1] << 8) | (c[..., 2] << 16)
+    slab = np.stack([slab_lo, slab_hi], axis=-1).astype(np.float32)
+    return {"colour32": colour32, "slab": slab}
 
 
 def pack_rgb(rgb: np.ndarray) -> np.ndarray:
@@ -689,7 +718,7 @@ class Renderer:
         self._dark_lut = _darkening_lut()
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
         self._last_camera = None
-        self._table = np.empty((7, IMAGE_W, IMAGE_H), np.float32)  # per-pixel ray constants, see _ray_table
+        self._terrain = np.ascontiguousarray(world.terrain_height, dtype=np.float32)
         self._sample_ground = {}  # (x, y) of a sample spot -> terrain height there, m
         az, el = math.radians(SUN_AZIMUTH_DEG), math.radians(SUN_ELEVATION_DEG)
         self._sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
@@ -715,10 +744,10 @@ class Renderer:
         origin, rot = self.camera(pose)
         img = np.empty((IMAGE_H, IMAGE_W, 3), np.uint8)
         depth = np.empty((IMAGE_H, IMAGE_W), np.float32)
-        _ray_table(rot, self.ray_a, self.ray_b, self._table)
         b = self.baked
-        _render_kernel(img, depth, self._table, b["ground"], b["slab_lo"], b["slab_hi"], b["colour64"],
-                       b["rock64"], b["cmax"], b["cground"], b["cbottom"], b["cflat"], b["bmax"],
+        terrain = self._terrain
+        _render_kernel(img, depth, np.ascontiguousarray(rot), self.ray_a, self.ray_b, terrain, 1.0 / float(self.world.terrain_cell_m), b["colour32"],
+                       b["slab"], b["rock64"], b["cmax"], b["cground"], b["cbottom"], b["cflat"], b["bmax"],
                        BLOCK_CELLS * COARSE_CELL_M, float(self.world.rock_cell_m), COARSE_CELL_M,
                        origin, FAR_M, FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self.zmax,
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
