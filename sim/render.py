@@ -42,6 +42,7 @@ COARSE_CELL_M = 1.0  # empty-space-skipping cell size, m
 BLOCK_CELLS = 8  # coarse cells per side of the second skipping level (sky and far rays), count
 DARK_LUT_STEP_M = 0.02  # distance resolution of the distance-darkening table, m
 DARK_LUT_MAX_M = 200.0  # the table's reach (farther hits use its last entry), m
+TEX_GROUND, TEX_COLOUR = 0, 1  # channels of the baked texel array (0.1 m height, 0xBBGGRR bits)
 SLAB_LO, SLAB_HI = 0, 1  # channels of the baked slab array (rock bottom, rock top), m
 WEIGHT_BITS = 13  # fixed-point bits of the colour blend weights (blend error < 0.1 grey level)
 LANE_BITS = 21  # bits per channel lane of a packed colour: 255 x 2**13 x (1 + rounding) fits
@@ -235,7 +236,7 @@ def bake_rasters(world: World):
     cflat = np.where((tmax == tmin) & ~rock, tmax, np.nan).astype(np.float32)
     assert cflat.shape == (cmax_shape, cmax_shape)
     return {"cflat": cflat, "bmax": _block_max(cmax, BLOCK_CELLS),
-            **_kernel_rasters(slab_lo, slab_hi, colour_ground), "rock64": pack_rgb(colour_rock),
+            **_kernel_rasters(ground, slab_lo, slab_hi, colour_ground), "rock64": pack_rgb(colour_rock),
             "top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
             "has_gap": has_gap, "colour": colour_ground, "colour_rock": colour_rock, "cmax": cmax,
             "cground": cground, "cbottom": cbottom,
@@ -371,6 +372,20 @@ def _ground_at(terrain, inv_tcell, x, y):
             + (terrain[r + 1, c] * (1 - tx) + terrain[r + 1, c + 1] * tx) * ty)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _ground01_at(tex, inv_cell, x, y):
+    """Bilinear height of the 0.1 m ground resample (the surface the colours were baked on), clamped."""
+    n = tex.shape[0] - 1
+    fx = min(max(x * inv_cell, 0.0), n - 1e-4)
+    fy = min(max(y * inv_cell, 0.0), n - 1e-4)
+    c = int(fx)
+    r = int(fy)
+    tx = fx - c
+    ty = fy - r
+    return ((tex[r, c, TEX_GROUND] * (1 - tx) + tex[r, c + 1, TEX_GROUND] * tx) * (1 - ty)
+            + (tex[r + 1, c, TEX_GROUND] * (1 - tx) + tex[r + 1, c + 1, TEX_GROUND] * tx) * ty)
+
+
 @njit(cache=True, nogil=True)
 def _solid_at(terrain, inv_tcell, slab, inv_cell, x, y, z):
     """0 free, 1 terrain, 3 rock slab, 2 free under an overhanging slab.
@@ -397,7 +412,7 @@ def _spread(c):
 
 
 @njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
-def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, colour32, slab, rock64, cmax,
+def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u, slab, rock64, cmax,
                    cground, cbottom, cflat, bmax, block_m, cell, coarse_m, origin,
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, world_size, dark_lut, dark_lut_step):
@@ -600,13 +615,14 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, colour32, 
                 lo = s_free
                 hi = s
                 if state == 1 and hi > lo:
-                    # terrain: one secant step on z - ground (smooth surface)
-                    if f_free > 0.0:
-                        f_lo = f_free
-                    else:
-                        f_lo = (oz + lo * k) - _ground_at(terrain, inv_tcell, ox + lo * hx, oy + lo * hy)
-                    f_hi = z - g
-                    if f_lo > 0.0 and f_hi <= 0.0 and f_lo - f_hi > 1e-9:
+                    # terrain: the march bracketed the crossing on the terrain grid's surface; place
+                    # the hit on the 0.1 m surface the colours were baked on (one secant step; these
+                    # are the cache lines the colour lookup reads next)
+                    f_lo = (oz + lo * k) - _ground01_at(tex, inv_cell, ox + lo * hx, oy + lo * hy)
+                    f_hi = z - _ground01_at(tex, inv_cell, x, y)
+                    if f_lo <= 0.0:
+                        hi = lo
+                    elif f_hi <= 0.0 and f_lo - f_hi > 1e-9:
                         hi = lo + (hi - lo) * f_lo / (f_lo - f_hi)
                 elif hi > lo:
                     # rock slab: bisection (nearest-cell slabs have vertical sides)
@@ -633,10 +649,10 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, colour32, 
                     tx = fx - c0
                     ty = fy - r0
                     ws = wscale * shade
-                    acc = (_spread(colour32[r0, c0]) * int((1.0 - tx) * (1.0 - ty) * ws + 0.5)
-                           + _spread(colour32[r0, c0 + 1]) * int(tx * (1.0 - ty) * ws + 0.5)
-                           + _spread(colour32[r0 + 1, c0]) * int((1.0 - tx) * ty * ws + 0.5)
-                           + _spread(colour32[r0 + 1, c0 + 1]) * int(tx * ty * ws + 0.5)
+                    acc = (_spread(tex_u[r0, c0, TEX_COLOUR]) * int((1.0 - tx) * (1.0 - ty) * ws + 0.5)
+                           + _spread(tex_u[r0, c0 + 1, TEX_COLOUR]) * int(tx * (1.0 - ty) * ws + 0.5)
+                           + _spread(tex_u[r0 + 1, c0, TEX_COLOUR]) * int((1.0 - tx) * ty * ws + 0.5)
+                           + _spread(tex_u[r0 + 1, c0 + 1, TEX_COLOUR]) * int(tx * ty * ws + 0.5)
                            + rounding)
                 else:  # rock slab: nearest cell, darker on the underside of an overhang
                     rr = _nearest(n, inv_cell, y)
@@ -662,13 +678,17 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, colour32, 
                 prev_s = far_m
 
 
-def _kernel_rasters(slab_lo, slab_hi, colour_ground) -> dict:
-    """The baked rasters as the kernel reads them: "colour32" uint32 (n, n) ground colour as 0xBBGGRR,
-    "slab" float32 (n, n, 2) rock bottom and top side by side (one cache line per lookup)."""
+def _kernel_rasters(ground, slab_lo, slab_hi, colour_ground) -> dict:
+    """The baked rasters as the kernel reads them. "tex": float32 (n, n, 2) the 0.1 m ground resample and
+    its colour (0xBBGGRR bits) side by side, so a hit's placement and its colour read the same cache
+    lines ("tex_u" is the same memory seen as uint32); "slab": float32 (n, n, 2) rock bottom and top."""
+    tex = np.empty(ground.shape + (2,), np.float32)
+    tex[..., TEX_GROUND] = ground
+    tex_u = tex.view(np.uint32)
     c = colour_ground.astype(np.uint32)
-    colour32 = c[..., 0] | (c[..., 1] << 8) | (c[..., 2] << 16)
+    tex_u[..., TEX_COLOUR] = c[..., 0] | (c[..., 1] << 8) | (c[..., 2] << 16)
     slab = np.stack([slab_lo, slab_hi], axis=-1).astype(np.float32)
-    return {"colour32": colour32, "slab": slab}
+    return {"tex": tex, "tex_u": tex_u, "slab": slab}
 
 
 def pack_rgb(rgb: np.ndarray) -> np.ndarray:
@@ -746,7 +766,8 @@ class Renderer:
         depth = np.empty((IMAGE_H, IMAGE_W), np.float32)
         b = self.baked
         terrain = self._terrain
-        _render_kernel(img, depth, np.ascontiguousarray(rot), self.ray_a, self.ray_b, terrain, 1.0 / float(self.world.terrain_cell_m), b["colour32"],
+        _render_kernel(img, depth, np.ascontiguousarray(rot), self.ray_a, self.ray_b, terrain, 1.0 / float(self.world.terrain_cell_m), b["tex"],
+                       b["tex_u"],
                        b["slab"], b["rock64"], b["cmax"], b["cground"], b["cbottom"], b["cflat"], b["bmax"],
                        BLOCK_CELLS * COARSE_CELL_M, float(self.world.rock_cell_m), COARSE_CELL_M,
                        origin, FAR_M, FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self.zmax,

@@ -222,24 +222,28 @@ def test_last_hit_is_nan_in_every_coordinate_for_sky(flat_renderer):
 
 
 def test_fast_kernel_draws_the_same_frames_as_the_reference_kernel(canyon_renderer):
-    """The sped-up raymarch (analytic level floor, block skipping, packed colours, numba samples)
-    must draw what the frozen pre-speed-up renderer draws, pitched and rolled poses included."""
+    """The sped-up raymarch (analytic level floor, block skipping, terrain marched on its own grid,
+    packed colours, numba samples) must draw what the frozen pre-speed-up renderer draws, pitched and
+    rolled poses included. The one intended difference: the terrain is now the bilinear surface of its
+    own 0.39 m grid, not of a 0.1 m resample of it, so wall feet seen from close by shift a pixel or two."""
     from benchmarks.render_v1 import RendererV1
 
     w = canyon_renderer.world
     old = RendererV1(w)
     rng = np.random.default_rng(7)
     rows, cols = np.nonzero(w.nav_truth)
-    pick = rng.integers(0, rows.size, 12)
     spots = w.sample_spots[:6]
     samples = [(x, y, 0.43, 25.0) for x, y in spots]
-    for i in pick:
+    close_fractions = []
+    for i in rng.integers(0, rows.size, 12):
         pose = (cols[i] + 0.5, rows[i] + 0.5, rng.uniform(0, 360), rng.normal(0, 3), rng.normal(0, 3))
         new_img = canyon_renderer.render(pose, samples)
         old_img = old.render(pose, samples)
-        close = np.abs(new_img.astype(int) - old_img.astype(int)).max(axis=2) <= 8
-        assert close.mean() >= 0.995, (pose, close.mean())
-        assert (_navigable(new_img) == _navigable(old_img)).mean() >= 0.998, pose
-        finite = np.isfinite(old.last_depth)
-        assert np.array_equal(finite, np.isfinite(canyon_renderer.last_depth)) or \
-            (finite != np.isfinite(canyon_renderer.last_depth)).mean() < 0.002
+        close_fractions.append((np.abs(new_img.astype(int) - old_img.astype(int)).max(axis=2) <= 8).mean())
+        assert (_navigable(new_img) == _navigable(old_img)).mean() >= 0.99, pose
+        same_sky = np.isfinite(old.last_depth) == np.isfinite(canyon_renderer.last_depth)
+        assert same_sky.mean() >= 0.998, pose
+        gold_old = (old_img[..., 0] > 150) & (old_img[..., 2] < 60)
+        gold_new = (new_img[..., 0] > 150) & (new_img[..., 2] < 60)
+        assert abs(int(gold_old.sum()) - int(gold_new.sum())) <= max(2, gold_old.sum() // 20), pose
+    assert np.mean(close_fractions) >= 0.97, close_fractions
