@@ -81,6 +81,7 @@ class MissionResult:
     round_trip_ms: float | None = None  # wire, unity timing: median capture -> command received, wall ms
     time_limit_s: float | None = None  # the mission's time limit (--time-limit), simulated s
     code_version: str | None = None  # git commit of the code that ran (+ "-dirty" with local changes)
+    render_fps: float | None = None  # wire, unity timing: render frames the twin managed per second (falls under load)
 
     def as_dict(self):
         return {k: nan_to_none(v) for k, v in asdict(self).items()}
@@ -256,7 +257,9 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
         rejected_commands=summary["rejected"], stuck_stretches=list(summary["stuck"].stretches),
         shadows=bool(world.cast_shadows), **timing.describe(),
         telemetry_hz=round(1.0 / period, 2) if period else None,
-        reply_delay_ms=summary.get("reply_delay_ms"), round_trip_ms=summary.get("round_trip_ms"))
+        reply_delay_ms=summary.get("reply_delay_ms"), round_trip_ms=summary.get("round_trip_ms"),
+        render_fps=round(summary["render_frames"] / tr.sim_time, 1) if summary.get("render_frames") and tr.sim_time
+        else None)
 
 
 def run_mission(seed=0, world="default", time_limit=TIME_LIMIT_S, out=None, video=None, record=None,

@@ -205,3 +205,18 @@ def test_realtime_extra_latency_holds_a_command_back():
     clock.t = 100.0 + 2 / 30
     sim.render_frame()
     assert len(sim.ws.sent) == 1 and twin.controls.throttle == 1
+
+
+def test_realtime_wire_mission_against_the_real_client():
+    """sim.mission --wire under unity timing: frame-paced telemetry, commands act a frame or more late."""
+    pytest.importorskip("sim.render")
+    from sim.mission import run_mission
+    from sim.timing import Timing
+    from sim.world import load_world
+
+    r = run_mission(seed=2, world=load_world("procedural:0"), time_limit=4.0, wire=True, progress=False,
+                    write_files=False, timing=Timing(fps=30.0))
+    assert r["mode"] == "wire" and r["timing"] == "unity" and r["fps"] == 30.0
+    assert r["rejected_commands"] == 0 and r["frames"] > 10
+    assert r["frames"] <= r["render_fps"] * r["time_s"] + 2  # at most one telemetry per render frame
+    assert r["reply_delay_ms"] >= 1e3 / 30 - 1  # never in the frame it answers
