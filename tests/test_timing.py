@@ -103,6 +103,22 @@ def test_the_client_reads_the_virtual_clock_and_the_loop_reproduces_per_seed_and
     assert slow[2] == pytest.approx(1e3 / 15, abs=0.1) and slow[0] != a[0]
 
 
+def test_lockstep_stays_available_with_its_clock():
+    seen = []
+
+    class Lockstep:
+        def __init__(self, clock):
+            self.rover = type("R", (), {"worldmap": np.zeros((200, 200, 3), np.uint8)})()
+
+        def handle_telemetry(self, tel):
+            seen.append(float(tel["sim_time"]))
+            return "data", {"throttle": "0.6", "steering_angle": "0", "brake": "0"}
+
+    s = run_inprocess(_flat_world(), 0, time_limit=3.0, progress=False, render=False, client_factory=Lockstep,
+                      timing=Timing("lockstep"))
+    assert s["twin"].frame == 75 and seen[:3] == pytest.approx([0.0, 0.04, 0.08])  # 0.04 s per command
+
+
 def test_the_real_client_mission_reproduces_exactly():
     pytest.importorskip("sim.render")
     from sim.world import load_world
