@@ -229,6 +229,20 @@ def test_side_slope_of_38_degrees_is_drivable():
     assert abs(body.state.y - 103.0) < 1.0  # the tyres hold it on the slope
 
 
+def test_real_wall_slope_at_36_degrees_of_roll_is_driven_without_contact(real_world):
+    """The wall slope at (62-83, 80-95), where a real rover drove 27 m at up to 38 deg of roll."""
+    body = P.RoverPhysics(real_world, 73.0, 94.5, 264.0)  # on a ~36 deg slope, heading along it
+    body.state.v = 2.0
+    rolls, hits = [], 0
+    for _ in range(100):
+        body.step(P.Controls(1.0, 0.0, 0.0))
+        rolls.append(abs(body.state.roll))
+        hits += body.state.collided
+    assert hits == 0
+    assert math.hypot(body.state.x - 73.0, body.state.y - 94.5) > 6.0
+    assert 30.0 < rolls[0] < 40.0
+
+
 def test_too_steep_side_slope_slides_down():
     n = 513
     ys = np.arange(n) * (200.0 / 512)
