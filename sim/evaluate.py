@@ -247,7 +247,7 @@ def markdown_table(results: list, summary: dict) -> str:
         cells = [_of_samples(r, c) if c in ("located", "collected") else _cell(r.get(c), fmt)
                  for c, _, fmt in MD_COLUMNS]
         lines.append("| " + " | ".join(cells) + " |")
-    n = len([r for r in results if "mapped_pct" in r])
+    n = len([r for r in results if "mapped_pct" in r and r.get("end_reason") != INTERRUPTED])  # the summary's rows
     for stat, label in (("median", "median"), ("worst", "worst")):
         row = [label]
         for c, _, fmt in MD_COLUMNS[1:]:

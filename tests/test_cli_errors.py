@@ -207,13 +207,19 @@ def test_ctrl_c_in_an_evaluation_keeps_finished_and_partial_missions(monkeypatch
     assert "Interrupted" in (tmp_path / "evaluation.md").read_text()
 
 
+def _default_sigint():
+    """A child started from a background shell inherits an ignored SIGINT; Ctrl-C must reach it."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_sigint_to_a_running_mission_process(tmp_path):
     """The real thing: SIGINT to `python -m sim.mission` -> exit 130 and a partial mission.json."""
     rec = tmp_path / "rec"
     proc = subprocess.Popen([sys.executable, "-m", "sim.mission", "--world", "procedural:0", "--time-limit", "600",
                              "--out", str(tmp_path / "out"), "--record", str(rec), "--no-progress",
                              "--log-level", "WARNING"],
-                            cwd=PROJECT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            cwd=PROJECT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)
     try:
         deadline = time.monotonic() + 120
         while not list(rec.glob("IMG/*.jpg")) and proc.poll() is None and time.monotonic() < deadline:
