@@ -39,6 +39,7 @@ import threading
 import time
 from pathlib import Path
 
+from dashboard import add_dashboard_options
 from sim.cli import check_paths, non_negative_int, parse_with_logging, port_number, seed_number, tool_parser
 from sim.mission_parts import TruthTrack, all_collected_and_home, open_recorder, progress_bar
 from sim.timing import UNITY_FPS, WIRE_LATENCY_MS, Timing
@@ -461,6 +462,7 @@ def main(argv=None) -> int:
     p.add_argument("--record", default=None, help="record a simulator-format log into this folder")
     p.add_argument("--open-telemetry", type=non_negative_int, default=OPEN_TELEMETRY_COUNT,
                    help="telemetry messages sent when the socket opens (the real sim: ~2)")
+    add_dashboard_options(p)
     a = parse_with_logging(p, argv)
     if not (math.isfinite(a.time_limit) and a.time_limit >= 0):
         p.error(f"--time-limit: must be >= 0 seconds, got {a.time_limit}")
@@ -475,12 +477,25 @@ def main(argv=None) -> int:
     if not (math.isfinite(a.fps) and a.fps > 0) or not (math.isfinite(a.extra_latency_ms) and a.extra_latency_ms >= 0):
         p.error("--fps must be positive and --extra-latency-ms non-negative")
     twin = RoverTwin(world, seed=a.seed, sim_time_field=a.mode == "lockstep")
+    on_frame = dash = None
+    if a.dashboard:  # the simulator's side: camera, true pose, commands, samples (dashboard/twin_view.py)
+        from dashboard import LiveDashboard
+        from dashboard.twin_view import TwinView
+
+        try:
+            dash = LiveDashboard(a.dashboard_port, title=f"sim.wire seed {a.seed} (simulator side)").start()
+        except OSError as exc:
+            p.error(f"--dashboard-port: {exc}")
+        view = TwinView(twin)
+
+        def on_frame(tw, dt):
+            dash.observe(view.update())
     recorder = open_recorder(a.record)
     limit = a.time_limit if a.time_limit and a.time_limit > 0 else math.inf
     log.info("mode %s%s", a.mode, f" at {a.fps:g} fps" if a.mode == "realtime"
              else " (EASIER than the real simulator: no latency, sim_time clock)")
     sim = WireSimulator(twin, a.host, a.port, a.mode, a.fps, recorder=recorder,
-                        should_stop=lambda: twin.sim_time >= limit, open_telemetry=a.open_telemetry,
+                        should_stop=lambda: twin.sim_time >= limit, open_telemetry=a.open_telemetry, on_frame=on_frame,
                         extra_latency_s=a.extra_latency_ms / 1e3)
     try:
         sim.run()
@@ -489,6 +504,8 @@ def main(argv=None) -> int:
     finally:
         if recorder is not None:
             recorder.close()
+        if dash is not None:
+            dash.close()
     return 0
 
 

@@ -204,3 +204,24 @@ def test_dashboard_page_in_headless_chromium(tmp_path):
     finally:
         pause.set()
         dash.close()
+
+
+def test_twin_view_shows_the_simulator_side():
+    """sim.wire --dashboard: the twin's camera, true pose, commands and samples reach the page's figures."""
+    from dashboard.twin_view import TwinView
+    from dashboard.view import figures
+    from sim.twin import RoverTwin
+    from sim.world import load_world
+
+    twin = RoverTwin(load_world("procedural:0"), seed=1)
+    twin.reset(1)
+    for _ in range(10):
+        twin.step("data", {"throttle": "1.0", "brake": "0", "steering_angle": "5.0"})
+    pub = Publisher(hz=0)
+    pub.observe(TwinView(twin).update())
+    _, snap = pub.slot.latest()
+    fig = figures(snap)
+    tr = twin.truth
+    assert (fig["x"], fig["y"]) == (round(tr.x, 2), round(tr.y, 2)) and fig["throttle"] == 1.0
+    assert fig["collected"] == 0 and fig["samples"] == len(tr.initial_samples)
+    assert snap.img is twin.last_rgb and fig["mapped"] == 0.0  # the client's map lives in the client
