@@ -10,6 +10,7 @@ with the same six gold samples in the scene. Printed: median/p90 ms per frame of
 clock and CPU time of this process: on the shared 2-core machine the CPU time is the steadier
 figure), their ratio, how far the two images agree, JPEG encode time, and the frames/s of a short
 in-process mission (physics + render + JPEG + the client's perception and decision).
+Also the new renderer with tyre tracks laid along the poses (issue 28: <= 10 ms median with tracks).
 Goals (issue 25): new median <= 2 ms, mission >= 300 frames/s on one core. Prints, never asserts.
 """
 import argparse
@@ -56,6 +57,7 @@ def compare_renderers(world, poses, samples, with_old=True):
     """Render every pose with the new (and old) renderer; returns timings and agreement figures."""
     from benchmarks.render_v1 import RendererV1
     from sim.render import Renderer, encode_jpeg
+    from sim.tracks import TyreTracks
 
     new = Renderer(world)
     old = RendererV1(world) if with_old else None
@@ -65,8 +67,15 @@ def compare_renderers(world, poses, samples, with_old=True):
     if old is not None:
         old.render(poses[0], samples)
     out = {"first_frame_s": first_new, "new_wall": [], "new_cpu": [], "old_wall": [], "old_cpu": [],
-           "jpeg": [], "agree": [], "nav_agree": [], "mean_abs": []}
+           "jpeg": [], "agree": [], "nav_agree": [], "mean_abs": [], "tracks_wall": [], "tracks_cpu": [],
+           "quads": []}
+    tracks = TyreTracks(world)  # laid along the poses in order, as the twin lays them frame by frame
     for pose in poses:
+        tracks.update(pose[0], pose[1], pose[2])
+        _, wall, cpu = _timed(lambda: new.render(pose, samples, tracks))
+        out["tracks_wall"].append(wall)
+        out["tracks_cpu"].append(cpu)
+        out["quads"].append(len(tracks.quads))
         img, wall, cpu = _timed(lambda: new.render(pose, samples))
         out["new_wall"].append(wall)
         out["new_cpu"].append(cpu)
@@ -124,6 +133,8 @@ def main(argv=None):
     log.info("world %s: load %.2f s, bake %.2f s, first frame (JIT/cache load) %.2f s, %d poses",
              world.name, t_load, t_bake, r["first_frame_s"], len(poses))
     log.info("new render ms/frame, wall: %s   cpu: %s", _stats(r["new_wall"]), _stats(r["new_cpu"]))
+    log.info("new + tyre tracks  wall: %s   cpu: %s  (%d-%d quads kept, laid along the poses)",
+             _stats(r["tracks_wall"]), _stats(r["tracks_cpu"]), min(r["quads"]), max(r["quads"]))
     if r["old_wall"]:
         log.info("old render ms/frame, wall: %s   cpu: %s", _stats(r["old_wall"]), _stats(r["old_cpu"]))
         log.info("speed-up old/new (ratio of medians): wall %.2fx  cpu %.2fx",

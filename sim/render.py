@@ -79,6 +79,11 @@ SAMPLE_WIDTH_PER_SCALE_M = 0.37  # sample width at prefab scale 1, m
 SAMPLE_HEIGHT_PER_SCALE_M = 0.32  # sample height at prefab scale 1, m
 SAMPLE_SINK_M = 0.02  # samples are sunk this much into the floor, m
 SAMPLE_MIN_SHADE = 0.62  # darkest shading of a sample, fraction of full colour
+# --- tyre tracks (sim/tracks.py lays them; simulator-facts.md section 1) ---
+TRACK_WHITE_RGB = (218.0, 194.0, 178.0)  # what a white surface on the lit floor looks like, 0..255 RGB
+# (fitted on royalejandro frames 1522, 2240, 3758, 5926: core track pixels / the Tracks.mat tint)
+TRACK_DRAW_MAX_M = 30.0  # quads farther than this (under half a pixel) are not drawn, m
+TRACK_DEPTH_TOLERANCE_M = 0.03  # a quad shows where it is no farther than this behind the surface hit, m
 SAMPLE_GROUND_CACHE = 256  # sample spots whose ground height a renderer remembers, count
 SAMPLE_RGB_255 = np.array(SAMPLE_RGB) * 255.0  # the same gold in 0..255 (read by the numba drawer)
 
@@ -739,6 +744,8 @@ class Renderer:
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
         self._last_camera = None
         self._terrain = np.ascontiguousarray(world.terrain_height, dtype=np.float32)
+        self._tread = None  # tyre-track tread mask, loaded with the first tracks drawn
+        self._track_rgb = None  # lit colour of a track texel on level floor, 0..255 RGB
         self._sample_ground = {}  # (x, y) of a sample spot -> terrain height there, m
         az, el = math.radians(SUN_AZIMUTH_DEG), math.radians(SUN_ELEVATION_DEG)
         self._sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
@@ -756,10 +763,11 @@ class Renderer:
         origin = np.array([x, y, root_z]) + rot @ mount
         return origin, rot
 
-    def render(self, pose, samples=()) -> np.ndarray:
+    def render(self, pose, samples=(), tracks=None) -> np.ndarray:
         """uint8 RGB (160, 320, 3) for pose (x, y, yaw, pitch, roll) in degrees.
 
         samples: iterable of (x, y, scale, yaw_deg) gold sample rocks to draw.
+        tracks: tyre tracks on the floor, a `sim.tracks.TyreTracks` or its (N, 4) `quads` array.
         """
         origin, rot = self.camera(pose)
         img = np.empty((IMAGE_H, IMAGE_W, 3), np.uint8)
@@ -773,6 +781,8 @@ class Renderer:
                        origin, FAR_M, FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self.zmax,
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M)
+        if tracks is not None:
+            self.draw_tracks(img, depth, origin, rot, tracks)
         self.draw_samples(img, depth, origin, rot, samples)
         self.last_depth = depth  # distance along the ray / |forward|, inf for sky
         self._last_camera = (origin, rot)
@@ -790,6 +800,23 @@ class Renderer:
             hit = origin + self.last_depth[..., None].astype(np.float64) * dirs
         hit[~np.isfinite(self.last_depth)] = np.nan
         return hit.astype(np.float32)
+
+    def draw_tracks(self, img, depth, origin, rot, tracks):
+        """Draw tyre-track quads (alpha cut-out tread, tinted, lit like the floor under them) in place."""
+        quads = np.ascontiguousarray(getattr(tracks, "quads", tracks), dtype=np.float64).reshape(-1, 4)
+        if not len(quads):
+            return
+        if self._tread is None:
+            from sim import tracks as tyre
+
+            self._tread = tyre.tread_mips(tyre.load_tread_alpha())
+            self._track_rgb = np.array(tyre.TINT) * np.array(TRACK_WHITE_RGB)
+        from sim.tracks import QUAD_HALF_M
+
+        _draw_tracks_kernel(img, depth, np.ascontiguousarray(rot), origin, self.ray_a, self.ray_b, quads,
+                            self._tread, QUAD_HALF_M, self._track_rgb, self.baked["light"],
+                            float(self.world.rock_cell_m), self._dark_lut, DARK_LUT_STEP_M, TRACK_DRAW_MAX_M,
+                            TRACK_DEPTH_TOLERANCE_M, FOCAL_PX, CX, CY)
 
     def draw_samples(self, img, depth, origin, rot, samples):
         """Draw gold sample rocks (shaded ellipsoids standing on the ground) into a frame in place,
@@ -883,4 +910,85 @@ def _draw_samples_kernel(img, depth, rot, origin, ray_a, ray_b, params, sun, min
                 shade = min_shade + (1.0 - min_shade) * lam
                 for ch in range(3):
                     img[v, u, ch] = np.uint8(min(max(SAMPLE_RGB_255[ch] * shade, 0.0), 255.0))
+                depth[v, u] = t
+
+
+@njit(cache=True, nogil=True)
+def _draw_tracks_kernel(img, depth, rot, origin, ray_a, ray_b, quads, tread, half, rgb, light, cell,
+                        dark_lut, dark_lut_step, max_dist, tolerance, focal, cx, cy):
+    """Per quad: project its corners, and in that screen box intersect each pixel's ray with the quad's
+    plane; an opaque tread texel in front of the surface the pixel shows (within `tolerance`) is drawn."""
+    h_img, w_img = depth.shape
+    ox, oy, oz = origin[0], origin[1], origin[2]
+    n_levels = tread.shape[0]
+    n_tex = tread.shape[1]
+    n_light = light.shape[0]
+    n_lut = dark_lut.shape[0]
+    for i in range(quads.shape[0]):
+        qx, qy, qz, yaw = quads[i, 0], quads[i, 1], quads[i, 2], quads[i, 3]
+        fx, fy = math.cos(yaw), math.sin(yaw)  # along the track
+        rx, ry = fy, -fx  # across it (the rover's right)
+        if (qx - ox) ** 2 + (qy - oy) ** 2 > max_dist * max_dist:
+            continue
+        u_min, u_max, v_min, v_max = 1e9, -1e9, 1e9, -1e9
+        behind = False
+        for corner in range(4):
+            sa = half if corner < 2 else -half
+            sb = half if corner % 2 == 0 else -half
+            px = qx + sa * fx + sb * rx - ox
+            py = qy + sa * fy + sb * ry - oy
+            pz = qz - oz
+            cam_x = rot[0, 0] * px + rot[1, 0] * py + rot[2, 0] * pz
+            cam_y = rot[0, 1] * px + rot[1, 1] * py + rot[2, 1] * pz
+            cam_z = rot[0, 2] * px + rot[1, 2] * py + rot[2, 2] * pz
+            if cam_z < 0.05:
+                behind = True
+                break
+            u = cx + focal * cam_x / cam_z
+            v = cy - focal * cam_y / cam_z
+            u_min = min(u_min, u)
+            u_max = max(u_max, u)
+            v_min = min(v_min, v)
+            v_max = max(v_max, v)
+        if behind:  # at the camera's feet: the view's nearest floor is 0.31 m ahead, so not visible
+            continue
+        u0 = max(int(u_min), 0)
+        u1 = min(int(u_max) + 1, w_img)
+        v0 = max(int(v_min), 0)
+        v1 = min(int(v_max) + 1, h_img)
+        for v in range(v0, v1):
+            b = ray_b[v]
+            for u in range(u0, u1):
+                a = ray_a[u]
+                dz = rot[2, 0] * a + rot[2, 1] * b + rot[2, 2]
+                if dz >= -1e-9:
+                    continue
+                t = (qz - oz) / dz
+                if t <= 0.0 or t > depth[v, u] + tolerance:
+                    continue
+                dx = rot[0, 0] * a + rot[0, 1] * b + rot[0, 2]
+                dy = rot[1, 0] * a + rot[1, 1] * b + rot[1, 2]
+                ex = ox + t * dx - qx
+                ey = oy + t * dy - qy
+                along = ex * fx + ey * fy
+                across = ex * rx + ey * ry
+                if abs(along) >= half or abs(across) >= half:
+                    continue
+                dist = t * math.sqrt(dx * dx + dy * dy + dz * dz)
+                # mip level from the texels one pixel spans across the view (anisotropic filtering)
+                texels = dist / focal * n_tex / (2.0 * half)
+                level = 0
+                while texels >= 2.0 and level < n_levels - 1:
+                    texels *= 0.5
+                    level += 1
+                row = int((along / (2.0 * half) + 0.5) * n_tex)
+                col = int((across / (2.0 * half) + 0.5) * n_tex)
+                if not tread[level, min(row, n_tex - 1), min(col, n_tex - 1)]:
+                    continue
+                lr = min(max(int((oy + t * dy) / cell + 0.5), 0), n_light - 1)
+                lc = min(max(int((ox + t * dx) / cell + 0.5), 0), n_light - 1)
+                li = min(int(dist / dark_lut_step), n_lut - 1)
+                shade = light[lr, lc] * dark_lut[li]
+                for ch in range(3):
+                    img[v, u, ch] = np.uint8(min(rgb[ch] * shade + 0.5, 255.0))
                 depth[v, u] = t

@@ -243,7 +243,8 @@ class RoverTwin:
             from sim.render import Renderer
 
             self._renderer = Renderer(self.world)
-        return self._renderer.render(self.pose(), [smp.render_tuple() for smp in self.samples])
+        from sim.tracks import tyre_tracks
+        return self._renderer.render(self.pose(), [smp.render_tuple() for smp in self.samples], tyre_tracks(self))
 
     def _image_b64(self) -> str:
         if not self.render_enabled:
