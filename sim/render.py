@@ -322,7 +322,7 @@ def _ray_column(rot, a, ray_b, col):
     """Per row of one image column (x = a) the ray's horizontal unit direction, slope and reciprocals.
 
     col[c, v]: 0 hx, 1 hy, 2 k = dz / |d_h|, 3 1/|d_h|, 4 1/hx, 5 1/hy (0 for a zero component),
-    6 |d| / |d_h| (distance per horizontal metre). Branch-free, so it vectorises; one column at a
+    6 |d| / |d_h| (distance per horizontal metre), 7 1/k (0 for a level ray). Branch-free, so it vectorises; one column at a
     time so the table stays in L1 next to the march.
     """
     col_x = rot[0, 0] * a + rot[0, 2]
@@ -345,6 +345,7 @@ def _ray_column(rot, a, ray_b, col):
         col[4, v] = 1.0 / hx if abs(hx) > 1e-12 else 0.0
         col[5, v] = 1.0 / hy if abs(hy) > 1e-12 else 0.0
         col[6, v] = math.sqrt(1.0 + k * k)
+        col[7, v] = 1.0 / k if abs(k) > 1e-12 else 0.0
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -355,8 +356,8 @@ def _ground_in(terrain, inv_tcell, x, y):
     the 0.1 m resample (16 MB) did not; the surface is the same bilinear one."""
     fx = x * inv_tcell
     fy = y * inv_tcell
-    c = int(fx)
-    r = int(fy)
+    c = np.uint64(fx)
+    r = np.uint64(fy)
     tx = fx - c
     ty = fy - r
     return ((terrain[r, c] * (1 - tx) + terrain[r, c + 1] * tx) * (1 - ty)
@@ -369,8 +370,8 @@ def _ground_at(terrain, inv_tcell, x, y):
     n = terrain.shape[0] - 1
     fx = min(max(x * inv_tcell, 0.0), n - 1e-6)
     fy = min(max(y * inv_tcell, 0.0), n - 1e-6)
-    c = int(fx)
-    r = int(fy)
+    c = np.uint64(fx)
+    r = np.uint64(fy)
     tx = fx - c
     ty = fy - r
     return ((terrain[r, c] * (1 - tx) + terrain[r, c + 1] * tx) * (1 - ty)
@@ -383,8 +384,8 @@ def _ground01_at(tex, inv_cell, x, y):
     n = tex.shape[0] - 1
     fx = min(max(x * inv_cell, 0.0), n - 1e-4)
     fy = min(max(y * inv_cell, 0.0), n - 1e-4)
-    c = int(fx)
-    r = int(fy)
+    c = np.uint64(fx)
+    r = np.uint64(fy)
     tx = fx - c
     ty = fy - r
     return ((tex[r, c, TEX_GROUND] * (1 - tx) + tex[r, c + 1, TEX_GROUND] * tx) * (1 - ty)
@@ -443,7 +444,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
     half = 1 << (WEIGHT_BITS - 1)
     rounding = half | (half << LANE_BITS) | (half << (2 * LANE_BITS))
     wscale = float(1 << WEIGHT_BITS)
-    table = np.empty((7, h_img))
+    table = np.empty((8, h_img))
     for u in range(w_img):
         _ray_column(rot, ray_a[u], ray_b, table)
         prev_s = 0.0  # where the ray below ended (hit, sky or far), horizontal m
@@ -544,7 +545,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                                 hit = 1
                                 break
                             if k < 0.0:
-                                s_hit = (gz - oz) / k
+                                s_hit = (gz - oz) * table[7, v]
                                 if s_hit < cell_end:
                                     s = max(s_hit, s)
                                     s_free = s
@@ -581,8 +582,8 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                         hit = 1
                         break
                     if rock_here:
-                        rr = int(y * inv_cell + 0.5)
-                        cc = int(x * inv_cell + 0.5)
+                        rr = np.uint64(y * inv_cell + 0.5)
+                        cc = np.uint64(x * inv_cell + 0.5)
                         if z <= slab[rr, cc, SLAB_HI]:
                             lo_r = slab[rr, cc, SLAB_LO]
                             if z >= lo_r:
@@ -649,8 +650,8 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                 if state == 1:  # terrain: bilinear ground colour
                     fx = min(max(x * inv_cell, 0.0), n - 1 - 1e-4)
                     fy = min(max(y * inv_cell, 0.0), n - 1 - 1e-4)
-                    c0 = int(fx)
-                    r0 = int(fy)
+                    c0 = np.uint64(fx)
+                    r0 = np.uint64(fy)
                     tx = fx - c0
                     ty = fy - r0
                     ws = wscale * shade
