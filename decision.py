@@ -33,7 +33,7 @@ from typing import Optional
 import numpy as np
 
 import perception
-from navigation import astar, explore, grid, pursuit, reactive, stuck
+from navigation import astar, explore, grid, predict, pursuit, reactive, stuck
 
 log = logging.getLogger(__name__)
 
@@ -159,15 +159,18 @@ class NavMemory:
         self.spin_hist = deque()  # (t, turning in place?, x, y) over SPIN_WINDOW_S
         self.spin_events = []  # (t, x, y) of every spin detection, for alternating the escape
         self.turn_ref = None  # (t, yaw) since when turning in place has not changed the heading
+        self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
         # planning
         self.path_xy = np.zeros((0, 2))
         self.path_idx = 0
         self.path_goal = None  # ("frontier" | "rock" | "home", (row, col))
         self.plan_time = -math.inf
         self.frontier_ignored = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
+        self.frontier_abandoned = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # ignored because given up, not reached
         self.frontier_count = None  # reachable frontier clusters at the last explore plan
         self.explored = False
         self.no_frontier_plans = 0  # consecutive explore plans that found no frontier
+        self.hidden_frontiers = 0  # reachable frontier clusters only the ignore mask hides (last plan without any)
         self.second_sweep_done = False
         self.search_left = True  # sample search still has places to visit
         self.search_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places the search has visited
@@ -291,6 +294,7 @@ def _update_memory(rover, nav, s):
             pass
         if nav.home is None and s.pos is not None:
             nav.home = s.pos
+    nav.lead.update(s.t, s.yaw)
     if s.pos is not None:
         nav.visits.update(s.t, grid.world_to_cell(s.pos))
         nav.loops.update(s.t, s.pos, s.yaw)
@@ -412,9 +416,15 @@ def _abandon_goal(nav, s):
         nav.rock_skip.append((nav.rock_target[0], nav.rock_target[1], s.t + ROCK_SKIP_S))
         nav.rock_target = None
     elif nav.path_goal is not None and nav.path_goal[0] == "frontier" and nav.path_goal[1] is not None:
-        explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
+        _give_up_frontier(nav)
     nav.path_goal = None
     nav.plan_time = -math.inf
+
+
+def _give_up_frontier(nav):
+    """Ignore the current frontier goal, remembering it was given up (not reached): see hidden_frontiers."""
+    explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
+    explore.ignore_disc(nav.frontier_abandoned, nav.path_goal[1])
 
 
 def _with_rotation(mode, cmd, nav):
@@ -514,8 +524,11 @@ def mode_stuck(nav, s):
 
 
 def mode_stop(nav, s):
-    """Brake, then turn in place toward nav.rotate_heading; None when aligned (or timed out)."""
-    err = ((nav.rotate_heading - s.yaw + 180.0) % 360.0) - 180.0
+    """Brake, then turn in place toward nav.rotate_heading; None when aligned (or timed out).
+
+    The error is judged where the heading will be when this command acts (latency lead).
+    """
+    err = predict.heading_error_at_lead(nav.rotate_heading, s.yaw, nav.lead.yaw_rate_dps, nav.lead.lead_s)
     if abs(err) <= ROTATE_EXIT_DEG or s.t - nav.rotate_since > ROTATE_TIMEOUT_S:
         nav.rotate_heading = None
         return None
@@ -543,7 +556,7 @@ def mode_forward(rover, nav, s):
             nav.plan_time = -math.inf
         if _goal_stalled(nav, s):
             log.info("frontier %s not getting closer: ignoring it", nav.path_goal[1])
-            explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
+            _give_up_frontier(nav)
             nav.plan_time = -math.inf
         return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
     return _wall_follow(nav, s)
@@ -593,6 +606,7 @@ def mode_sample(rover, nav, s):
     if abs(math.degrees(alpha)) > SAMPLE_ROTATE_DEG and abs(s.vel) < 1.0:
         _start_rotation(nav, s, s.yaw + math.degrees(alpha), reason)
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    dist = predict.distance_at_lead(dist, s.vel, nav.lead.lead_s)  # where the rover is when this command acts
     speed = float(np.clip(SAMPLE_SPEED_GAIN * (dist - SAMPLE_STOP_M) + SAMPLE_MIN_SPEED_MPS,
                           SAMPLE_MIN_SPEED_MPS, SAMPLE_MAX_SPEED_MPS))
     steer = float(np.clip(SAMPLE_STEER_GAIN * math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
@@ -677,8 +691,13 @@ def _drive_heading(nav, s, alpha, max_speed, planned=False):
 
 
 def _follow_path(nav, s, max_speed, slow_at_end):
-    """Pure pursuit on nav.path_xy, with reactive correction and end-of-path slowdown."""
-    steer, alpha, pt, idx, remaining = pursuit.pursue(nav.path_xy, s.pos, s.yaw, s.vel, nav.path_idx)
+    """Pure pursuit on nav.path_xy, with reactive correction and end-of-path slowdown.
+
+    The pursuit point is chosen from the pose predicted one telemetry interval ahead, where the
+    rover will be when this command acts.
+    """
+    x, y, yaw = predict.predict_pose(s.pos[0], s.pos[1], s.yaw, s.vel, nav.lead.yaw_rate_dps, nav.lead.lead_s)
+    steer, alpha, pt, idx, remaining = pursuit.pursue(nav.path_xy, (x, y), yaw, s.vel, nav.path_idx)
     nav.path_idx = idx
     _track_goal_progress(nav, s, remaining)
     speed = max_speed
@@ -786,7 +805,7 @@ def _plan_explore(rover, nav, s):
     """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
     free, obstacle, unknown = _grids(rover)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, nav.seen_close)
-    targets, cost, parent = [], None, None
+    targets, cost, parent, dist = [], None, None, None
     for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
         dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
         targets = explore.frontier_targets(mask, dist)
@@ -797,6 +816,9 @@ def _plan_explore(rover, nav, s):
     goal = explore.choose_target(targets, s.pos, s.yaw, current)
     if goal is None:
         nav.no_frontier_plans += 1
+        if dist is not None:  # dist is from the last cost grid: without the stuck memory when there is any
+            nav.hidden_frontiers = len(explore.ignored_frontiers(free, unknown, nav.frontier_abandoned, dist,
+                                                                 obstacle, nav.seen_close))
         nav.explored = nav.no_frontier_plans >= EXPLORED_CONFIRM_PLANS and s.t > EXPLORED_MIN_TIME_S
         _set_path(nav, s, "frontier", None, [])
         nav.plan_time = s.t - REPLAN_S + 0.5  # look again soon
@@ -938,10 +960,16 @@ def _should_go_home(rover, nav, s):
         return True
     if not nav.explored:
         return False
-    if s.samples_remaining is not None and s.samples_remaining > 0 and SECOND_SWEEP and not nav.second_sweep_done:
-        log.info("map complete with %d samples missing: second sweep", s.samples_remaining)
+    missing = s.samples_remaining is not None and s.samples_remaining > 0
+    if (missing or nav.hidden_frontiers) and SECOND_SWEEP and not nav.second_sweep_done:
+        # an abandoned frontier that is still reachable (often behind cells remembered as stuck)
+        # means the map is not complete, even with every sample in
+        log.info("map complete with %d samples missing and %d abandoned frontiers reachable: second sweep",
+                 s.samples_remaining or 0, nav.hidden_frontiers)
         nav.second_sweep_done = True
         nav.frontier_ignored[:] = False
+        nav.frontier_abandoned[:] = False
+        nav.hidden_frontiers = 0
         nav.explored = False
         return False
     return True

@@ -190,6 +190,17 @@ def search_target(free, visited, done, dist):
     return divmod(k, free.shape[1])
 
 
+def ignored_frontiers(free, unknown, ignored, dist, obstacle=None, seen_close=None):
+    """Reachable frontier clusters that only the ignore mask hides (same layout as frontier_targets).
+
+    A frontier is ignored after the rover gave up on it, often because it got stuck on the
+    way; when that was the only way into an arm, the map is not complete: the caller should
+    look again (with the stuck memory off) before it calls the map done.
+    """
+    mask = frontier_mask(free, unknown, None, obstacle, seen_close) & ignored
+    return frontier_targets(mask, dist)
+
+
 def map_complete(targets):
     """The map is complete when no reachable frontier cluster is left."""
     return len(targets) == 0

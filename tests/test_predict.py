@@ -1,0 +1,165 @@
+"""Latency lead (navigation.predict) and frontiers hidden behind given-up goals (explore.ignored_frontiers)."""
+import math
+
+import numpy as np
+import pytest
+
+import decision
+from navigation import astar, explore, grid, predict
+
+
+# ------------------------------------------------------------------ lead estimator
+def test_lead_is_the_smoothed_frame_interval_on_the_clients_clock():
+    est = predict.LeadEstimator()
+    assert est.lead_s == 0.0  # nothing measured yet: no prediction
+    for k in range(60):
+        est.update(k / 15.0, 90.0)  # 15 fps
+    assert est.lead_s == pytest.approx(1 / 15.0, rel=1e-3)
+    assert est.yaw_rate_dps == pytest.approx(0.0)
+
+
+def test_lead_is_capped_and_pauses_are_not_intervals():
+    est = predict.LeadEstimator()
+    est.update(0.0, 0.0)
+    est.update(0.5, 0.0)  # a slow machine: 2 fps
+    assert est.lead_s == predict.LEAD_MAX_S
+    est.update(10.0, 0.0)  # a 9.5 s pause (simulator menu) is not a frame interval
+    assert est.interval_s == pytest.approx(0.5)
+
+
+def test_yaw_rate_wraps_across_north_and_ignores_bad_input():
+    est = predict.LeadEstimator()
+    est.update(0.0, 359.0)
+    est.update(0.1, 3.5)  # turned 4.5 deg CCW through 0
+    assert est.yaw_rate_dps == pytest.approx(45.0)
+    est.update(float("nan"), 10.0)
+    est.update(0.2, float("inf"))
+    assert est.yaw_rate_dps == pytest.approx(45.0) and est.interval_s == pytest.approx(0.1)
+
+
+# ------------------------------------------------------------------ pose prediction
+def test_straight_prediction_moves_along_the_heading():
+    x, y, yaw = predict.predict_pose(10.0, 20.0, 90.0, 2.0, 0.0, 0.1)
+    assert (x, y, yaw) == pytest.approx((10.0, 20.2, 90.0))
+
+
+def test_arc_prediction_stays_on_the_circle():
+    # 1 m/s at 45 deg/s for 2 s: a quarter... of a circle of radius 1/(pi/4) m, heading 0 -> 90
+    r = 1.0 / math.radians(45.0)
+    x, y, yaw = predict.predict_pose(0.0, 0.0, 0.0, 1.0, 45.0, 2.0)
+    assert yaw == pytest.approx(90.0)
+    assert (x, y) == pytest.approx((r, r))
+
+
+def test_prediction_with_bad_numbers_returns_the_pose():
+    assert predict.predict_pose(1.0, 2.0, 30.0, float("nan"), 0.0, 0.1) == (1.0, 2.0, 30.0)
+    assert predict.predict_pose(1.0, 2.0, 30.0, 3.0, 0.0, -1.0) == (1.0, 2.0, 30.0)
+
+
+@pytest.mark.parametrize("err,rate,lead,expect", [
+    (20.0, 45.0, 0.1, 15.5),  # turning toward the target: 4.5 deg of it happen before the command acts
+    (3.0, 45.0, 0.1, 0.0),  # the target is passed within the lead: done now
+    (-20.0, -45.0, 0.1, -15.5),  # the same, clockwise
+    (20.0, -45.0, 0.1, 20.0),  # still swinging the other way: no credit
+    (20.0, 0.0, 0.1, 20.0),  # not yet turning
+])
+def test_turn_in_place_is_judged_at_the_lead(err, rate, lead, expect):
+    assert predict.heading_error_at_lead(100.0 + err, 100.0, rate, lead) == pytest.approx(expect)
+
+
+def test_distance_at_lead_never_negative_and_ignores_reverse():
+    assert predict.distance_at_lead(1.0, 2.0, 0.1) == pytest.approx(0.8)
+    assert predict.distance_at_lead(0.1, 2.0, 0.1) == 0.0
+    assert predict.distance_at_lead(1.0, -1.0, 0.1) == 1.0
+
+
+def test_turn_in_place_stops_earlier_with_latency():
+    """The same turn, measured at 10 fps with the rover turning at 45 deg/s, ends a frame sooner."""
+    def frames_until_done(with_lead):
+        nav = decision.NavMemory()
+        nav.rotate_heading, nav.rotate_since = 90.0, 0.0
+        yaw, t = 60.0, 0.0
+        for k in range(40):
+            s = decision.Inputs(t=t, pos=(100.0, 85.0), yaw=yaw, vel=0.0, nav_angles=np.zeros(0),
+                                nav_dists=np.zeros(0), obs_angles=np.zeros(0), obs_dists=np.zeros(0),
+                                rock_angles=np.zeros(0), rock_dists=np.zeros(0), near_sample=False,
+                                picking_up=False, samples_remaining=6)
+            if with_lead:
+                nav.lead.update(t, yaw)
+            if decision.mode_stop(nav, s) is None:
+                return k
+            yaw, t = yaw + 4.5, t + 0.1
+        return None
+    assert frames_until_done(True) < frames_until_done(False)
+
+
+# ------------------------------------------------------------------ frontiers behind given-up goals
+def _arm_behind_a_given_up_goal():
+    """A mapped hub with one arm going east; the arm's open end (x 140) was given up."""
+    wm = np.zeros((200, 200, 3), np.uint8)
+    wm[80:91, 90:141, 2] = 255  # hub + arm, open at the east end (x 141+ unknown)
+    wm[79, 89:142, 0] = 255
+    wm[91, 89:142, 0] = 255
+    wm[79:92, 89, 0] = 255
+    free, obstacle, unknown = grid.classify(wm)
+    ignored = np.zeros_like(free)
+    explore.ignore_disc(ignored, (85, 140), radius=6.0)
+    cost = grid.cost_grid(free, obstacle)
+    dist, _ = astar.distance_field(cost, (85, 95))
+    return free, obstacle, unknown, ignored, dist
+
+
+def test_the_only_frontier_given_up_leaves_the_map_complete_to_the_planner():
+    free, obstacle, unknown, ignored, dist = _arm_behind_a_given_up_goal()
+    mask = explore.frontier_mask(free, unknown, ignored)
+    assert explore.map_complete(explore.frontier_targets(mask, dist))  # what used to send the rover home
+
+
+def test_a_reachable_given_up_frontier_is_reported():
+    free, obstacle, unknown, ignored, dist = _arm_behind_a_given_up_goal()
+    hidden = explore.ignored_frontiers(free, unknown, ignored, dist)
+    assert len(hidden) == 1 and abs(hidden[0][1] - 140) <= 1
+
+
+def test_an_unreachable_given_up_frontier_is_not_reported():
+    free, obstacle, unknown, ignored, _ = _arm_behind_a_given_up_goal()
+    cost = grid.cost_grid(free, obstacle)
+    cost[80:91, 120] = np.inf  # a wall across the arm (e.g. a rock)
+    dist, _ = astar.distance_field(cost, (85, 95))
+    assert len(explore.ignored_frontiers(free, unknown, ignored, dist)) == 0
+
+
+def _rover_with_abandoned_arm():
+    from rover_state import RoverState
+    r = RoverState()
+    r.pos, r.yaw, r.total_time, r.vel = (110.0, 85.0), 0.0, 100.0, 0.0
+    r.start_pos = (100.0, 85.0)
+    r.samples_remaining, r.samples_initial = 0, 6  # every sample is in
+    rng = np.random.default_rng(0)
+    r.nav_angles, r.nav_dists = rng.uniform(-0.6, 0.6, 2000), rng.uniform(1.0, 8.0, 2000)  # open floor ahead
+    r.worldmap[80:91, 90:141, 2] = 255
+    r.worldmap[79, 89:142, 0] = 255
+    r.worldmap[91, 89:142, 0] = 255
+    r.worldmap[79:92, 89, 0] = 255
+    r.nav = decision.NavMemory()
+    r.nav.seen_close[:] = True
+    return r
+
+
+@pytest.mark.parametrize("abandoned", [True, False])
+def test_all_samples_in_but_an_arm_given_up_is_explored_before_going_home(abandoned):
+    r = _rover_with_abandoned_arm()
+    explore.ignore_disc(r.nav.frontier_ignored, (85, 140), radius=6.0)
+    if abandoned:  # given up (stuck / not getting closer), not reached
+        explore.ignore_disc(r.nav.frontier_abandoned, (85, 140), radius=6.0)
+    goal = None
+    for _ in range(200):
+        r.total_time += 0.1
+        decision.decision_step(r)
+        goal = r.nav.path_goal
+        if goal is not None and goal[1] is not None and goal[0] in ("home", "frontier"):
+            break
+    if abandoned:
+        assert r.nav.second_sweep_done and goal[0] == "frontier" and abs(goal[1][1] - 140) <= 2
+    else:  # a frontier the rover reached and could not see past does not hold it back
+        assert goal[0] == "home"
