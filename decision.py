@@ -33,7 +33,7 @@ from typing import Optional
 import numpy as np
 
 import perception
-from navigation import astar, explore, grid, predict, pursuit, reactive, stuck
+from navigation import approach, astar, explore, grid, predict, pursuit, reactive, stuck
 
 log = logging.getLogger(__name__)
 
@@ -100,6 +100,9 @@ SAMPLE_VISION_MEMORY_S = 1.0  # keep steering by vision this long after the rock
 PICKUP_STOP_SPEED_MPS = 0.04  # request pickup only below this speed (autonomy's gate is 0.05), m/s
 PICKUP_RETRY_S = 2.0  # re-request a pickup if picking_up did not start within this, s
 PICKUP_REACH_M = 0.84  # pickup point ahead of the rover origin, m
+STAGE_DECIDE_M = 7.0  # a rock this close gets its approach decided: straight in, or via a staging point, m
+STAGE_REACHED_M = 0.6  # the staging point counts as reached this close, m
+STAGE_FACE_DEG = 15.0  # at the staging point, turn in place when the rock is further off than this (above ROTATE_EXIT_DEG, so a finished turn never restarts), degrees
 COLLECT_DEBOUNCE_S = 3.0  # pickup-finished and count-dropped within this time are one collection, s
 
 # --- mission -----------------------------------------------------------------------------
@@ -186,6 +189,9 @@ class NavMemory:
         self.rock_seen_time = -math.inf  # last time the target was seen in the camera
         self.rock_bearing = 0.0  # last camera bearing of the target, rad
         self.rock_dist = math.inf  # last camera distance of the target, m
+        self.stage = None  # (x, y, heading) to line up at before the final run to the rock, or None: straight in
+        self.stage_for = None  # the rock target (x, y) the approach was decided for, or None: not decided
+        self.stage_done = False  # the staging point was reached and the rover faced the rock
         self.collected = []  # world (x, y) of collected samples
         self.rock_skip = []  # (x, y, until_t)
         self.pickup_sent_at = -math.inf
@@ -590,6 +596,9 @@ def mode_sample(rover, nav, s):
         nav.rock_target = None
         nav.path_goal = None
         return Command(0.0, BRAKE_STOP, 0.0)
+    staged = _stage_approach(rover, nav, s, dist)
+    if staged is not None:
+        return staged
     if dist > SAMPLE_VISUAL_M:
         # far: the planner knows the walls, a straight line at the rock may not
         goal = grid.world_to_cell(nav.rock_target)
@@ -612,6 +621,62 @@ def mode_sample(rover, nav, s):
     steer = float(np.clip(SAMPLE_STEER_GAIN * math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
     thr, brk = _speed_control(s.vel, speed)
     return Command(thr, brk, steer)
+
+
+def _arrival_point(nav, s):
+    """Where the rover will come from on its final run to the rock: the planned path's point
+    approach.FINAL_RUN_M before its end (the path curves round walls), else the rover itself."""
+    if nav.path_goal is None or nav.path_goal[0] != "rock" or len(nav.path_xy) < 2:
+        return s.pos
+    steps = np.hypot(*np.diff(nav.path_xy[::-1], axis=0).T)
+    k = int(np.searchsorted(np.cumsum(steps), approach.FINAL_RUN_M))
+    return tuple(nav.path_xy[::-1][min(k + 1, len(nav.path_xy) - 1)])
+
+
+def _stage_approach(rover, nav, s, dist):
+    """Command toward the rock's staging point (see navigation.approach), or None to approach normally.
+
+    Decided once per rock when it is within STAGE_DECIDE_M: a rock whose straight final run
+    from the rover is not mapped floor (a nook) is approached from a staging point with a
+    clear run in, whatever the heading the rover arrives with.
+    """
+    if nav.stage_for is None or math.hypot(nav.rock_target[0] - nav.stage_for[0],
+                                           nav.rock_target[1] - nav.stage_for[1]) > ROCK_SAME_M:
+        if dist > STAGE_DECIDE_M:
+            return None
+        free = _grids(rover)[0]
+        nav.stage_for, nav.stage_done = nav.rock_target, False
+        arrival = _arrival_point(nav, s)
+        nav.stage = None if approach.direct_run_clear(free, arrival, nav.rock_target) else \
+            approach.staging_point(free, nav.rock_target, arrival)
+        if nav.stage is not None:
+            log.info("rock at (%.1f, %.1f): lining up at (%.1f, %.1f) first", *nav.rock_target, *nav.stage[:2])
+    if nav.stage is None or nav.stage_done:
+        return None
+    sx, sy, _heading = nav.stage
+    d_stage = math.hypot(sx - s.pos[0], sy - s.pos[1])
+    if d_stage > STAGE_REACHED_M:
+        goal = grid.world_to_cell((sx, sy))
+        if d_stage > PATH_END_SLOW_M / 2:
+            if nav.path_goal != ("stage", goal) or _needs_replan(nav, s):
+                _plan_to(rover, nav, s, "stage", goal)
+            if len(nav.path_xy) >= 2:
+                return _follow_path(nav, s, SAMPLE_PATH_SPEED_MPS, slow_at_end=True)
+        alpha = pursuit.bearing(s.pos, s.yaw, (sx, sy))
+        if abs(math.degrees(alpha)) > ROTATE_ENTER_DEG:
+            _start_rotation(nav, s, s.yaw + math.degrees(alpha), "stage-final")
+            return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+        thr, brk = _speed_control(s.vel, float(np.clip(0.6 * d_stage, SAMPLE_MIN_SPEED_MPS, 1.0)))
+        return Command(thr, brk, float(np.clip(math.degrees(alpha), -STEER_LIMIT_DEG, STEER_LIMIT_DEG)))
+    alpha = pursuit.bearing(s.pos, s.yaw, nav.rock_target)
+    if abs(math.degrees(alpha)) > STAGE_FACE_DEG:
+        if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
+            return Command(0.0, BRAKE_STOP, 0.0)
+        _start_rotation(nav, s, s.yaw + math.degrees(alpha), "stage-face")
+        return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    nav.stage_done = True
+    nav.path_goal = None
+    return None
 
 
 def mode_home(rover, nav, s):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import decision
-from navigation import astar, explore, grid, predict
+from navigation import approach, astar, explore, grid, predict
 
 
 # ------------------------------------------------------------------ lead estimator
@@ -163,3 +163,49 @@ def test_all_samples_in_but_an_arm_given_up_is_explored_before_going_home(abando
         assert r.nav.second_sweep_done and goal[0] == "frontier" and abs(goal[1][1] - 140) <= 2
     else:  # a frontier the rover reached and could not see past does not hold it back
         assert goal[0] == "home"
+
+
+# ------------------------------------------------------------------ nook approach
+def _nook():
+    """Open floor x 80..120, y 80..100, and a 2 m wide nook going east at y 90..91 to x 126; sample at its end."""
+    free = np.zeros((200, 200), bool)
+    free[80:101, 80:121] = True
+    free[89:92, 121:127] = True
+    return free, (125.5, 90.5)
+
+
+def test_sample_in_a_nook_is_lined_up_from_its_opening_whatever_side_the_rover_comes_from():
+    free, sample = _nook()
+    for rover in [(118.0, 99.0), (118.0, 81.0), (100.0, 90.0), (119.5, 85.0)]:
+        stage = approach.staging_point(free, sample, rover)
+        assert stage is not None
+        x, y, heading = stage
+        assert x < sample[0] - 2.0 and abs(y - sample[1]) < 1.0  # in the opening (3 m wide), near its axis
+        assert abs(predict.wrap_deg(heading - 0.0)) < 16.0  # facing east, into the nook
+        assert approach.direct_run_clear(free, (x, y), sample)
+
+
+def test_direct_run_is_clear_on_open_floor_and_blocked_past_a_corner():
+    free, sample = _nook()
+    assert approach.direct_run_clear(free, (121.0, 90.5), sample)  # straight down the nook
+    assert not approach.direct_run_clear(free, (119.0, 98.0), sample)  # the corner is in the way
+    assert approach.staging_point(np.zeros((200, 200), bool), sample) is None  # nowhere clear: no staging
+    assert approach.staging_point(free, (float("nan"), 1.0)) is None
+
+
+def test_east_nook_of_the_real_map_has_a_clear_staging_point_from_any_side():
+    import shared_data
+    from evaluation.metrics import load_ground_truth
+    path = shared_data.ground_truth_map_path()
+    if not shared_data.available(path):
+        pytest.skip(f"no ground-truth map at {path} (set ROVER_SHARED)")
+    free = load_ground_truth(path) > 0
+    sample = (148.8, 109.6)
+    for a in range(0, 360, 45):
+        rover = (sample[0] + 6 * math.cos(math.radians(a)), sample[1] + 6 * math.sin(math.radians(a)))
+        stage = approach.staging_point(free, sample, rover)
+        assert stage is not None, a
+        assert free[int(stage[1]), int(stage[0])]
+        assert 145.0 < stage[0] < 148.0 and stage[1] > 109.6  # in the opening, north-west of the sample
+        assert abs(predict.wrap_deg(stage[2] - 340.0)) < 20.0  # facing into the nook (east-south-east)
+    assert not approach.direct_run_clear(free, (146.0, 104.0), sample)  # from the south the rocks are in the way
