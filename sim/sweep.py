@@ -229,6 +229,7 @@ def sweep(specs, seeds, world="default", shadows=False, time_limit=TIME_LIMIT_S,
     out = Path(out)
     md = markdown(names, combos, rows, currents)
     seeds_text = f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+    world = next((m["world"] for g in grouped for m in g if m.get("world")), world)  # "default" -> its name
     title = (f"sweep on {world}, seeds {seeds_text}, time limit {time_limit:.0f} s, shadows {'on' if shadows else 'off'}, "
              f"{timing_label(timing.describe())}")
     meta = {"constants": names, "current_values": [_label(c) for c in currents], "seeds": seeds_text, "world": world,
