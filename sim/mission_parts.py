@@ -146,8 +146,12 @@ def progress_bar(total, enabled, desc):
     (callers wrap their run in tqdm's logging_redirect_tqdm so log lines do not break it)."""
     from tqdm import tqdm
 
-    return tqdm(total=round(total), unit="sim s", disable=not enabled, desc=desc, leave=True,
-                bar_format=PROGRESS_FORMAT)
+    class SimSecondsBar(tqdm):
+        def update(self, n=1):  # the last frame may pass the time limit: stop at the total
+            return super().update(max(0.0, min(n, self.total - self.n)))
+
+    return SimSecondsBar(total=round(total), unit="sim s", disable=not enabled, desc=desc, leave=True,
+                         bar_format=PROGRESS_FORMAT)
 
 
 def open_recorder(folder):
