@@ -488,8 +488,9 @@ def main(argv=None) -> int:
             p.error(f"--dashboard-port: {exc}")
         view = TwinView(twin)
 
-        def on_frame(tw, dt):
+        def publish(tw, dt):
             dash.observe(view.update())
+        on_frame = publish
     recorder = open_recorder(a.record)
     limit = a.time_limit if a.time_limit and a.time_limit > 0 else math.inf
     log.info("mode %s%s", a.mode, f" at {a.fps:g} fps" if a.mode == "realtime"
