@@ -15,6 +15,8 @@ import threading
 import time
 from pathlib import Path
 
+from wire_guard import HostCheck, allowed_host_names
+
 log = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.1"  # only this machine can open the page
@@ -145,7 +147,9 @@ class DashboardServer:
         if problem:
             raise OSError(problem)
         self.source = source
-        self.server = make_server(host, port, create_app(self), threaded=True)
+        # Loopback Host names only (and the bound one): a DNS-rebinding page cannot read the view.
+        app = HostCheck(create_app(self), allowed_host_names([host]))
+        self.server = make_server(host, port, app, threaded=True)
         self.server.daemon_threads = True
         self.host, self.port = self.server.server_address[:2]
         self._thread = None

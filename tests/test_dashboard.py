@@ -101,7 +101,7 @@ def test_a_stalled_page_never_blocks_the_publisher():
     server = DashboardServer(LiveSource(pub.slot, ViewRenderer()), port=0).start()
     stalled = socket.create_connection((server.host, server.port))
     stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1024)
-    stalled.sendall(b"GET /api/stream HTTP/1.1\r\nHost: x\r\n\r\n")
+    stalled.sendall(b"GET /api/stream HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
     done = threading.Event()
 
     def publish_many():
@@ -118,6 +118,20 @@ def test_a_stalled_page_never_blocks_the_publisher():
         assert state["figures"]["frame"] == client.rover.frame_count
     finally:
         stalled.close()
+        server.stop()
+
+
+def test_a_page_under_a_foreign_host_name_is_refused():
+    """DNS rebinding: a page served as evil.example that resolves to 127.0.0.1 must not read the view."""
+    pub = Publisher(hz=0)
+    server = DashboardServer(LiveSource(pub.slot, ViewRenderer()), port=0).start()
+    try:
+        for host, status in (("evil.example", b" 403 "), (f"localhost:{server.port}", b" 200 ")):
+            with socket.create_connection((server.host, server.port), timeout=10) as conn:
+                conn.sendall(f"GET / HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n".encode())
+                status_line = conn.makefile("rb").readline()
+            assert status in status_line, (host, status_line)
+    finally:
         server.stop()
 
 
