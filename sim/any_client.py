@@ -81,44 +81,24 @@ def _log_tail(path) -> bytes:
 
 def run_client_summary(world, seed, client_path, time_limit=900.0, progress=True, fps=None):
     """Run the mission; returns the summary dict sim.mission.finish_mission scores (+ "client_log" bytes)."""
-    from sim.mission_parts import TruthTrack, all_collected_and_home, progress_bar
     from sim.timing import Timing
     from sim.twin import RoverTwin
-    from sim.wire import DEFAULT_FPS, WireSimulator, free_port, stop_process, wait_for_port
+    from sim.wire import DEFAULT_FPS, WireMissionWatch, WireSimulator, free_port, stop_process, wait_for_port
 
     twin = RoverTwin(world, seed=seed)  # no sim_time: such clients time themselves
     port = free_port()
     workdir = tempfile.mkdtemp(prefix="twin-any-client-")
-    state = {"end": "time limit", "completed": False, "still_home_s": 0.0}
-    track = TruthTrack(twin)
-    bar = progress_bar(time_limit, progress, f"seed {seed} ({Path(client_path).name})")
+    watch = WireMissionWatch(twin, time_limit, progress, f"seed {seed} ({Path(client_path).name})",
+                             home_still_s=HOME_STILL_S, stall_timeout_s=STALL_TIMEOUT_S)
+    track, bar = watch.track, watch.bar
     proc = None
-
-    def on_frame(tw, dt):
-        track.update(tw, dt)
-        bar.update(dt)
-        done = all_collected_and_home(tw.truth) and abs(tw.truth.v) < 0.01
-        state["still_home_s"] = state["still_home_s"] + dt if done else 0.0
-
-    def should_stop():
-        if twin.sim_time >= time_limit:
-            return True
-        if state["still_home_s"] >= HOME_STILL_S:
-            state["end"], state["completed"] = "all collected and home", True
-            return True
-        if proc.poll() is not None:
-            state["end"] = f"client exited with {proc.returncode}"
-            return True
-        if time.monotonic() - wire.last_command_wall > STALL_TIMEOUT_S:
-            state["end"] = "stalled: no command from the client"
-            return True
-        return False
-
-    wire = WireSimulator(twin, port=port, mode="realtime", fps=fps or DEFAULT_FPS, on_frame=on_frame,
-                        should_stop=should_stop)
+    wire = WireSimulator(twin, port=port, mode="realtime", fps=fps or DEFAULT_FPS, on_frame=watch.on_frame,
+                        should_stop=watch.should_stop)
+    watch.wire = wire
     t0 = time.perf_counter()
     try:
         proc, map_path, log_path = launch(client_path, port, workdir, world.nav_truth)
+        watch.proc = proc
         if not wait_for_port(port, proc, timeout=CLIENT_START_TIMEOUT_S):
             tail = _log_tail(log_path).decode("utf-8", "replace")[-2000:]
             raise RuntimeError(f"{client_path} did not listen on port {port} (exit {proc.poll()}):\n{tail}")
@@ -133,7 +113,7 @@ def run_client_summary(world, seed, client_path, time_limit=900.0, progress=True
     if worldmap is None:
         log.info("no readable worldmap from %s: mapped/fidelity not scored", client_path)
     return dict(twin=twin, stuck=track.stuck, traj=track.traj, distance=track.distance,
-                wall=time.perf_counter() - t0, end_reason=state["end"], completed=state["completed"],
+                wall=time.perf_counter() - t0, end_reason=watch.end, completed=watch.completed,
                 worldmap=worldmap, rejected=wire.rejected, client_log=client_log, commands=wire.commands,
                 timing=Timing(fps=fps or DEFAULT_FPS))
 

@@ -352,6 +352,43 @@ def _load_client_map(path):
     return m if m.shape == (200, 200, 3) else None
 
 
+class WireMissionWatch:
+    """Truth tracking, progress and the stop rules every wire mission shares (drive_rover.py or any client).
+
+    Ends at the time limit, after home_still_s stopped at home with every sample, when the client
+    exits, or when it sends no command for stall_timeout_s wall seconds. Set .proc and .wire once they exist.
+    """
+
+    def __init__(self, twin, time_limit, progress, desc, home_still_s=HOME_STILL_S, stall_timeout_s=STALL_TIMEOUT_S):
+        self.twin, self.time_limit = twin, time_limit
+        self.home_still_s, self.stall_timeout_s = home_still_s, stall_timeout_s
+        self.end, self.completed, self.still_home_s = "time limit", False, 0.0
+        self.track = TruthTrack(twin)
+        self.bar = progress_bar(time_limit, progress, desc)
+        self.proc = None  # the client process
+        self.wire = None  # the WireSimulator (its last_command_wall)
+
+    def on_frame(self, tw, dt):
+        self.track.update(tw, dt)
+        self.bar.update(dt)
+        done = all_collected_and_home(tw.truth) and abs(tw.truth.v) < 0.01
+        self.still_home_s = self.still_home_s + dt if done else 0.0
+
+    def should_stop(self):
+        if self.twin.sim_time >= self.time_limit:
+            return True
+        if self.still_home_s >= self.home_still_s:
+            self.end, self.completed = "all collected and home", True
+            return True
+        if self.proc.poll() is not None:
+            self.end = f"client exited with {self.proc.returncode}"
+            return True
+        if time.monotonic() - self.wire.last_command_wall > self.stall_timeout_s:
+            self.end = "stalled: no command from the client"
+            return True
+        return False
+
+
 def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, render=True,
                      server_log=None, home_by=None, timing: Timing | None = None,
                      client_args=()):
@@ -382,34 +419,15 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
         extra += ["--home-by", repr(float(home_by))]
     extra += list(client_args)  # e.g. --dashboard
     proc = start_client_server(port, server_log, extra)
-    state = {"end": "time limit", "completed": False, "still_home_s": 0.0}
-    track = TruthTrack(twin)
-    bar = progress_bar(time_limit, progress, f"seed {seed} (wire, {mode})")
+    watch = WireMissionWatch(twin, time_limit, progress, f"seed {seed} (wire, {mode})")
+    watch.proc = proc
+    track, bar = watch.track, watch.bar
     recorder = open_recorder(record)
 
-    def on_frame(tw, dt):
-        track.update(tw, dt)
-        bar.update(dt)
-        done = all_collected_and_home(tw.truth) and abs(tw.truth.v) < 0.01
-        state["still_home_s"] = state["still_home_s"] + dt if done else 0.0
-
-    def should_stop():
-        if twin.sim_time >= time_limit:
-            return True
-        if state["still_home_s"] >= HOME_STILL_S:
-            state["end"], state["completed"] = "all collected and home", True
-            return True
-        if proc.poll() is not None:
-            state["end"] = f"client exited with {proc.returncode}"
-            return True
-        if time.monotonic() - sim.last_command_wall > STALL_TIMEOUT_S:
-            state["end"] = "stalled: no command from the client"
-            return True
-        return False
-
     extra_latency_s = max(0.0, timing.latency_ms - WIRE_LATENCY_MS) / 1e3 if timing.unity else 0.0
-    sim = WireSimulator(twin, port=port, mode=mode, fps=timing.fps, recorder=recorder, on_frame=on_frame,
-                        should_stop=should_stop, extra_latency_s=extra_latency_s)
+    sim = WireSimulator(twin, port=port, mode=mode, fps=timing.fps, recorder=recorder, on_frame=watch.on_frame,
+                        should_stop=watch.should_stop, extra_latency_s=extra_latency_s)
+    watch.wire = sim
     t0 = time.perf_counter()
     try:
         if not wait_for_port(port, proc):
@@ -417,7 +435,7 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
         sim.last_command_wall = time.monotonic()
         sim.run()
     except KeyboardInterrupt:  # Ctrl-C: the caller writes the partial mission
-        state["end"] = "interrupted"
+        watch.end = "interrupted"
         log.warning("Ctrl-C at %.0f s simulated: writing the partial mission", twin.sim_time)
     finally:
         bar.close()
@@ -437,7 +455,7 @@ def run_wire_mission(world, seed, time_limit=900.0, record=None, progress=True, 
                  "capture -> command acted %s ms median", sim.render_frames, sim.replies,
                  median_ms(sim.round_trips_s), median_ms(sim.reply_delays_s))
     return dict(twin=twin, stuck=track.stuck, traj=track.traj, distance=track.distance,
-                wall=time.perf_counter() - t0, end_reason=state["end"], completed=state["completed"],
+                wall=time.perf_counter() - t0, end_reason=watch.end, completed=watch.completed,
                 worldmap=worldmap, rejected=sim.rejected, timing=timing,
                 reply_delay_ms=median_ms(sim.reply_delays_s) if timing.unity else None,
                 round_trip_ms=median_ms(sim.round_trips_s) if timing.unity else None,
