@@ -15,7 +15,7 @@ websocket = pytest.importorskip("websocket")
 
 import drive_rover  # noqa: E402
 from benchmarks.frame import sim_telemetry  # noqa: E402
-from wire_client import RECV_TIMEOUT_S, FakeSimulator, Server, assert_command  # noqa: E402
+from wire_client import RECV_TIMEOUT_S, FakeSimulator, Server, assert_command, server_and_sim_fixtures  # noqa: E402
 
 N_FRAMES = 12  # real frames sent per lockstep test
 
@@ -29,18 +29,7 @@ def frames(test_dataset_dir):
     return [(f, Path(f.image_path).read_bytes()) for f in picked]
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    srv = Server(tmp_path_factory.mktemp("wire"))
-    yield srv
-    srv.stop()
-
-
-@pytest.fixture
-def sim(server):
-    s = FakeSimulator(server.port)
-    yield s
-    s.close(polite=False)
+server, sim = server_and_sim_fixtures("wire")
 
 
 # --- protocol ------------------------------------------------------------------------

@@ -18,7 +18,8 @@ websocket = pytest.importorskip("websocket")
 import supporting_functions as sf  # noqa: E402
 from tests.test_parsing import telemetry  # noqa: E402
 import wire_guard  # noqa: E402
-from wire_client import QUIET_S, FakeSimulator, Server, assert_command, sim_url  # noqa: E402
+from wire_client import (QUIET_S, FakeSimulator, assert_command, server_and_sim_fixtures,  # noqa: E402
+                         sim_url)
 
 FUZZ_SEED = 26  # the number; any seed must pass
 FUZZ_FRAMES = 1200  # corrupted frames per run
@@ -28,18 +29,7 @@ MAX_FRAME_BYTES = 8 << 20  # eventlet's websocket frame limit, bytes
 REPLY_GAP_S = 60.0  # longest silence tolerated while replies are owed (a loaded 2-core box), s
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    srv = Server(tmp_path_factory.mktemp("faults"))
-    yield srv
-    srv.stop()
-
-
-@pytest.fixture
-def sim(server):
-    s = FakeSimulator(server.port)
-    yield s
-    s.close(polite=False)
+server, sim = server_and_sim_fixtures("faults")
 
 
 def valid():

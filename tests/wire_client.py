@@ -162,6 +162,27 @@ class FakeSimulator:
             self.ws.close()
 
 
+def server_and_sim_fixtures(tmp_name):
+    """The (server, sim) fixture pair wire test files share: one drive_rover.py per module, a fresh simulator per test.
+
+    Use as ``server, sim = server_and_sim_fixtures("name")`` at a test module's top level.
+    """
+
+    @pytest.fixture(scope="module")
+    def server(tmp_path_factory):
+        srv = Server(tmp_path_factory.mktemp(tmp_name))
+        yield srv
+        srv.stop()
+
+    @pytest.fixture
+    def sim(server):
+        s = FakeSimulator(server.port)
+        yield s
+        s.close(polite=False)
+
+    return server, sim
+
+
 def assert_command(name, payload):
     assert name in ("data", "pickup", "manual"), name
     assert isinstance(payload, dict)
