@@ -8,19 +8,9 @@ import pytest
 from sim.twin import RoverTwin
 from sim.wire import WireSimulator, decode_event, encode_event, free_port, start_client_server, \
     stop_process, wait_for_port
-from sim.world import World
+from twin_worlds import flat_world
 
 FRAMES = 300  # lockstep frames against the real client server
-
-
-def _flat_world():
-    return World(terrain_height=np.zeros((513, 513), np.float32),
-                 sand_weight=np.ones((512, 512), np.float32),
-                 rock_top=np.zeros((2001, 2001), np.float32),
-                 rock_bottom=np.zeros((2001, 2001), np.float32),
-                 nav_truth=np.full((200, 200), 255, np.uint8),
-                 sample_spots=np.array([[100.0 + i, 60.0] for i in range(8)]),
-                 start_xy=(100.0, 100.0), start_yaw_training=0.0, name="flat-test")
 
 
 class FakeSocket:
@@ -33,7 +23,7 @@ class FakeSocket:
 
 @pytest.fixture()
 def sim():
-    s = WireSimulator(RoverTwin(_flat_world(), seed=0, render=False, sim_time_field=True), port=1,
+    s = WireSimulator(RoverTwin(flat_world(), seed=0, render=False, sim_time_field=True), port=1,
                       mode="lockstep")
     s.ws = FakeSocket()
     return s
@@ -145,7 +135,7 @@ class FakeClock:
 
 def _realtime(extra_latency_s=0.0):
     clock = FakeClock()
-    twin = RoverTwin(_flat_world(), seed=0, render=False)
+    twin = RoverTwin(flat_world(), seed=0, render=False)
     sim = WireSimulator(twin, port=1, mode="realtime", fps=30, clock=clock, extra_latency_s=extra_latency_s)
     sim.ws = FakeSocket()
     sim._open()  # the socket opened at wall 100.0: t = 0 of the scene

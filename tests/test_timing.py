@@ -10,20 +10,10 @@ import pytest
 from sim.mission import run_inprocess
 from sim.timing import Timing, TwinLoop, frame_after, physics_steps_at
 from sim.twin import RoverTwin
-from sim.world import World
+from twin_worlds import flat_world
 
 SIM_DIR = Path(__file__).resolve().parent.parent / "sim"
 DRIVE = {"throttle": "1", "steering_angle": "0", "brake": "0"}
-
-
-def _flat_world():
-    return World(terrain_height=np.zeros((513, 513), np.float32),
-                 sand_weight=np.ones((512, 512), np.float32),
-                 rock_top=np.zeros((2001, 2001), np.float32),
-                 rock_bottom=np.zeros((2001, 2001), np.float32),
-                 nav_truth=np.full((200, 200), 255, np.uint8),
-                 sample_spots=np.array([[100.0 + i, 60.0] for i in range(8)]),
-                 start_xy=(100.0, 100.0), start_yaw_training=0.0, name="flat-test")
 
 
 def test_frame_and_physics_arithmetic():
@@ -40,14 +30,14 @@ def test_frame_and_physics_arithmetic():
 
 
 def test_no_sim_time_unless_asked():
-    assert "sim_time" not in RoverTwin(_flat_world(), render=False).reset(0)
-    assert "sim_time" in RoverTwin(_flat_world(), render=False, sim_time_field=True).reset(0)
+    assert "sim_time" not in RoverTwin(flat_world(), render=False).reset(0)
+    assert "sim_time" in RoverTwin(flat_world(), render=False, sim_time_field=True).reset(0)
     assert not Timing().sends_sim_time and Timing("lockstep").sends_sim_time
 
 
 def _drive_once(latency_ms, until_s=0.5):
     """Capture at t=0, answer with full throttle after latency_ms, then let physics run on."""
-    twin = RoverTwin(_flat_world(), seed=0, render=False)
+    twin = RoverTwin(flat_world(), seed=0, render=False)
     loop = TwinLoop(twin, Timing(fps=30, latency_ms=latency_ms, compute_ms=0.0))
     loop.reset(0, start_yaw=0.0)
     tel, dt = loop.step("data", DRIVE)
@@ -91,7 +81,7 @@ def test_the_client_reads_the_virtual_clock_and_the_loop_reproduces_per_seed_and
             return "data", {"throttle": "0.6", "steering_angle": "10", "brake": "0"}
 
     def run(timing):
-        s = run_inprocess(_flat_world(), 0, time_limit=3.0, progress=False, render=False,
+        s = run_inprocess(flat_world(), 0, time_limit=3.0, progress=False, render=False,
                           client_factory=Recording, timing=timing)
         return s["traj"], s["twin"].frame, s["reply_delay_ms"]
 
@@ -114,7 +104,7 @@ def test_lockstep_stays_available_with_its_clock():
             seen.append(float(tel["sim_time"]))
             return "data", {"throttle": "0.6", "steering_angle": "0", "brake": "0"}
 
-    s = run_inprocess(_flat_world(), 0, time_limit=3.0, progress=False, render=False, client_factory=Lockstep,
+    s = run_inprocess(flat_world(), 0, time_limit=3.0, progress=False, render=False, client_factory=Lockstep,
                       timing=Timing("lockstep"))
     assert s["twin"].frame == 75 and seen[:3] == pytest.approx([0.0, 0.04, 0.08])  # 0.04 s per command
 
