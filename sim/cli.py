@@ -43,12 +43,17 @@ def log_level(text: str) -> str:
     return name
 
 
+def _parsed(text: str, convert, what: str):
+    """convert(text), or the one-line argparse error "'text' is not <what>"."""
+    try:
+        return convert(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not {what}") from None
+
+
 def seed_number(text: str) -> int:
     """A scene seed: a whole number >= 0."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    v = _parsed(text, int, "a whole number")
     if v < 0:
         raise argparse.ArgumentTypeError(f"seeds are >= 0, got {v}")
     return v
@@ -56,40 +61,29 @@ def seed_number(text: str) -> int:
 
 def port_number(text: str) -> int:
     """A TCP port 0..65535 (0 = any free port)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a port number") from None
+    v = _parsed(text, int, "a port number")
     if not 0 <= v <= 65535:
         raise argparse.ArgumentTypeError(f"ports are 0..65535, got {v}")
     return v
 
 
-def positive_number(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+def positive_number(text: str, what: str = "a positive number") -> float:
+    """A finite number > 0; ``what`` names it in the range error (e.g. "a positive number of seconds")."""
+    v = _parsed(text, float, "a number")
     if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+        raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
     return v
 
 
 def positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    v = _parsed(text, int, "a whole number")
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
     return v
 
 
 def non_negative_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    v = _parsed(text, int, "a whole number")
     if v < 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
     return v
