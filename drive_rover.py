@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import logging
-import math
 import os
 import queue
 import re
@@ -356,13 +355,9 @@ def add_home_by_option(parser: argparse.ArgumentParser):
 
 
 def positive_seconds(text):
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text!r}")
-    return v
+    from sim.cli import positive_number
+
+    return positive_number(text, "a positive number of seconds")
 
 
 def main(argv=None) -> int:

@@ -15,17 +15,7 @@ from __future__ import annotations
 import argparse
 
 from dashboard.server import DEFAULT_HOST, DEFAULT_PORT
-
-
-def port_number(text):
-    """argparse type for a TCP port: an integer 0..65535 (0 = any free port)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
-    if not 0 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"port must be 0..65535, got {v}")
-    return v
+from sim.cli import port_number
 
 
 def add_dashboard_options(parser: argparse.ArgumentParser):
