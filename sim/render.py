@@ -349,13 +349,8 @@ def _ray_column(rot, a, ray_b, col):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _ground_in(terrain, inv_tcell, x, y):
-    """Bilinear terrain height at a point known to lie inside the world (no clamping).
-
-    Read from the world's own terrain grid (513 x 513, 1 MB): it stays in the CPU's cache, where
-    the 0.1 m resample (16 MB) did not; the surface is the same bilinear one."""
-    fx = x * inv_tcell
-    fy = y * inv_tcell
+def _bilinear_terrain(terrain, fx, fy):
+    """Bilinear terrain height at grid coordinates (fx, fy) known to lie inside the grid."""
     c = np.uint64(fx)
     r = np.uint64(fy)
     tx = fx - c
@@ -365,17 +360,21 @@ def _ground_in(terrain, inv_tcell, x, y):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _ground_in(terrain, inv_tcell, x, y):
+    """Bilinear terrain height at a point known to lie inside the world (no clamping).
+
+    Read from the world's own terrain grid (513 x 513, 1 MB): it stays in the CPU's cache, where
+    the 0.1 m resample (16 MB) did not; the surface is the same bilinear one."""
+    return _bilinear_terrain(terrain, x * inv_tcell, y * inv_tcell)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _ground_at(terrain, inv_tcell, x, y):
     """Bilinear terrain height anywhere (clamped to the world)."""
     n = terrain.shape[0] - 1
     fx = min(max(x * inv_tcell, 0.0), n - 1e-6)
     fy = min(max(y * inv_tcell, 0.0), n - 1e-6)
-    c = np.uint64(fx)
-    r = np.uint64(fy)
-    tx = fx - c
-    ty = fy - r
-    return ((terrain[r, c] * (1 - tx) + terrain[r, c + 1] * tx) * (1 - ty)
-            + (terrain[r + 1, c] * (1 - tx) + terrain[r + 1, c + 1] * tx) * ty)
+    return _bilinear_terrain(terrain, fx, fy)
 
 
 @njit(cache=True, nogil=True, inline="always")
