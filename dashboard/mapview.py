@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from replay.outputs import (COLOR_GOOD, COLOR_OBSTACLE, COLOR_PATH, COLOR_ROCK, COLOR_TRUTH_MISSED,
-                            COLOR_WRONG)
+                            COLOR_WRONG, score_colors)
 
 COLOR_PLAN = (255, 0, 255)  # planned path (BGR magenta)
 COLOR_TARGET = (0, 140, 255)  # decision target (BGR orange)
@@ -40,17 +40,7 @@ LEGEND_ITEMS = (  # (colour, label, kind) in legend order
 def base_map(worldmap: np.ndarray, truth: Optional[np.ndarray], scale: int) -> np.ndarray:
     """Worldmap over truth as BGR, north up, ``scale`` px per metre (no overlays)."""
     size = worldmap.shape[0]
-    img = np.zeros((size, size, 3), np.uint8)
-    marked = worldmap[:, :, 2] > 0
-    img[(worldmap[:, :, 0] > 0) & ~marked] = COLOR_OBSTACLE
-    if truth is not None:
-        t = truth > 0
-        img[t & ~marked] = COLOR_TRUTH_MISSED
-        img[marked & t] = COLOR_GOOD
-        img[marked & ~t] = COLOR_WRONG
-    else:
-        img[marked] = COLOR_GOOD
-    img = np.ascontiguousarray(img[::-1])
+    img = np.ascontiguousarray(score_colors(worldmap, truth)[::-1])
     return cv2.resize(img, (size * scale, size * scale), interpolation=cv2.INTER_NEAREST)
 
 

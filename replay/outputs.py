@@ -51,9 +51,10 @@ def write_json(path, payload: dict):
     _atomic_write_bytes(Path(path), (json.dumps(payload, indent=2, sort_keys=True) + "\n").encode())
 
 
-def map_image(worldmap: np.ndarray, ground_truth: Optional[np.ndarray], rocks=(), trajectory=None,
-              title_lines=()) -> np.ndarray:
-    """BGR image of the worldmap scored against the ground truth, north up, with a legend."""
+def score_colors(worldmap: np.ndarray, ground_truth: Optional[np.ndarray]) -> np.ndarray:
+    """BGR cells of the worldmap scored against the ground truth (one pixel per cell, rows as stored: south up).
+
+    The replay map and dashboard.mapview both colour with this, so every map reads the same."""
     size = worldmap.shape[0]
     img = np.zeros((size, size, 3), np.uint8)
     marked = worldmap[:, :, 2] > 0
@@ -66,6 +67,14 @@ def map_image(worldmap: np.ndarray, ground_truth: Optional[np.ndarray], rocks=()
         img[marked & ~truth] = COLOR_WRONG
     else:
         img[marked] = COLOR_GOOD
+    return img
+
+
+def map_image(worldmap: np.ndarray, ground_truth: Optional[np.ndarray], rocks=(), trajectory=None,
+              title_lines=()) -> np.ndarray:
+    """BGR image of the worldmap scored against the ground truth, north up, with a legend."""
+    size = worldmap.shape[0]
+    img = score_colors(worldmap, ground_truth)
     big = cv2.resize(img, (size * MAP_SCALE, size * MAP_SCALE), interpolation=cv2.INTER_NEAREST)
 
     def to_px(x, y):  # world metres -> pixel in the north-up image
