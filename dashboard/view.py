@@ -39,11 +39,20 @@ def rgb_to_bgr(img) -> Optional[np.ndarray]:
 
 
 def _num(v, digits=3):
+    """A finite float for JSON (None otherwise), rounded to `digits` (None: sent exactly)."""
     try:
         v = float(v)
     except (TypeError, ValueError):
         return None
-    return round(v, digits) if math.isfinite(v) else None
+    if not math.isfinite(v):
+        return None
+    return v if digits is None else round(v, digits)
+
+
+def _shown(v):
+    # Figures the page prints with fewer digits go out unrounded: rounding here and again in the
+    # page (toFixed) can land one step off what the client itself would print (1.149 -> 1.15 -> 1.1).
+    return _num(v, None)
 
 
 class History:
@@ -89,12 +98,12 @@ def figures(snap) -> dict:
     score = score_map(snap.worldmap, snap.truth, [tuple(p) for p in snap.samples])
     collected = (snap.initial - snap.remaining) if snap.initial is not None and snap.remaining is not None \
         else None
-    return {"t": _num(snap.t, 2), "frame": snap.frame, "mode": snap.mode, "goal": snap.plan_goal,
+    return {"t": _shown(snap.t), "frame": snap.frame, "mode": snap.mode, "goal": snap.plan_goal,
             "target": None if snap.target is None else [_num(snap.target[0], 1), _num(snap.target[1], 1)],
             "x": _num(snap.pos[0], 2), "y": _num(snap.pos[1], 2), "yaw": _num(snap.yaw, 1),
-            "speed": _num(snap.speed), "throttle": _num(snap.throttle), "brake": _num(snap.brake),
-            "steer": _num(snap.steer, 2), "mapped": _num(score.mapped_pct, 2),
-            "fidelity": _num(score.fidelity_pct, 2), "located": score.located, "collected": collected,
+            "speed": _shown(snap.speed), "throttle": _shown(snap.throttle), "brake": _shown(snap.brake),
+            "steer": _shown(snap.steer), "mapped": _shown(score.mapped_pct),
+            "fidelity": _shown(score.fidelity_pct), "located": score.located, "collected": collected,
             "samples": snap.initial}
 
 

@@ -42,8 +42,11 @@ def frame_time_s(name: str) -> Optional[float]:
 
 
 def _nan_none(v, digits=2):
+    """A finite float or None, rounded to `digits` (None: exact, for figures the page rounds itself)."""
     v = float(v)
-    return round(v, digits) if math.isfinite(v) else None
+    if not math.isfinite(v):
+        return None
+    return v if digits is None else round(v, digits)
 
 
 class MissionSource:
@@ -147,8 +150,8 @@ class MissionSource:
                             samples=self.samples, stuck=stuck, start=start,
                             pose=(c["x"][i], c["y"][i], c["yaw"][i]))
         camera, vision = self._camera(t, i)
-        fig = {key: _nan_none(c[key][i]) for key in ("t", "x", "y", "yaw", "speed", "throttle", "brake", "steer",
-                                                     "mapped", "fidelity")}
+        fig = {key: _nan_none(c[key][i], None) for key in ("t", "x", "y", "yaw", "speed", "throttle", "brake",
+                                                           "steer", "mapped", "fidelity")}
         for key in ("located", "collected"):
             v = c[key][i]
             fig[key] = int(v) if math.isfinite(v) else None
