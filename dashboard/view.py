@@ -38,7 +38,7 @@ def rgb_to_bgr(img) -> Optional[np.ndarray]:
     return np.ascontiguousarray(img[:, :, ::-1])
 
 
-def _num(v, digits=3):
+def json_number(v, digits=3):
     """A finite float for JSON (None otherwise), rounded to `digits` (None: sent exactly)."""
     try:
         v = float(v)
@@ -49,10 +49,10 @@ def _num(v, digits=3):
     return v if digits is None else round(v, digits)
 
 
-def _shown(v):
+def shown_number(v):
     # Figures the page prints with fewer digits go out unrounded: rounding here and again in the
     # page (toFixed) can land one step off what the client itself would print (1.149 -> 1.15 -> 1.1).
-    return _num(v, None)
+    return json_number(v, None)
 
 
 class History:
@@ -73,7 +73,7 @@ class History:
         elif ts and t - ts[-1] < HISTORY_EVERY_S:
             return
         for k, v in zip(self.KEYS, (t, mapped, fidelity, located, collected)):
-            self.data[k].append(_num(v, 2))
+            self.data[k].append(json_number(v, 2))
         if len(ts) > HISTORY_MAX_POINTS:
             for k in self.KEYS:
                 self.data[k] = self.data[k][::2]
@@ -98,12 +98,12 @@ def figures(snap) -> dict:
     score = score_map(snap.worldmap, snap.truth, [tuple(p) for p in snap.samples])
     collected = (snap.initial - snap.remaining) if snap.initial is not None and snap.remaining is not None \
         else None
-    return {"t": _shown(snap.t), "frame": snap.frame, "mode": snap.mode, "goal": snap.plan_goal,
-            "target": None if snap.target is None else [_num(snap.target[0], 1), _num(snap.target[1], 1)],
-            "x": _num(snap.pos[0], 2), "y": _num(snap.pos[1], 2), "yaw": _num(snap.yaw, 1),
-            "speed": _shown(snap.speed), "throttle": _shown(snap.throttle), "brake": _shown(snap.brake),
-            "steer": _shown(snap.steer), "mapped": _shown(score.mapped_pct),
-            "fidelity": _shown(score.fidelity_pct), "located": score.located, "collected": collected,
+    return {"t": shown_number(snap.t), "frame": snap.frame, "mode": snap.mode, "goal": snap.plan_goal,
+            "target": None if snap.target is None else [json_number(snap.target[0], 1), json_number(snap.target[1], 1)],
+            "x": json_number(snap.pos[0], 2), "y": json_number(snap.pos[1], 2), "yaw": json_number(snap.yaw, 1),
+            "speed": shown_number(snap.speed), "throttle": shown_number(snap.throttle), "brake": shown_number(snap.brake),
+            "steer": shown_number(snap.steer), "mapped": shown_number(score.mapped_pct),
+            "fidelity": shown_number(score.fidelity_pct), "located": score.located, "collected": collected,
             "samples": snap.initial}
 
 
@@ -134,10 +134,10 @@ class ViewRenderer:
         if self._prev is not None and snap.wall > self._prev[0] and snap.episode == self._prev[2]:
             rate = (snap.frame - self._prev[1]) / (snap.wall - self._prev[0])
         self._prev = (snap.wall, snap.frame, snap.episode)
-        fig["telemetry_hz"] = _num(rate, 1)
+        fig["telemetry_hz"] = json_number(rate, 1)
         return {"version": version, "kind": "live", "figures": fig,
                 "images": {"camera": jpeg_data_url(rgb_to_bgr(snap.img)),
                            "vision": jpeg_data_url(rgb_to_bgr(snap.vision)),
                            "map": jpeg_data_url(map_picture(snap, self.scale))},
                 "history": self.history.data, "events": snap.events,
-                "timings": {k: _num(v) for k, v in snap.timings.items()}, "counters": snap.counters}
+                "timings": {k: json_number(v) for k, v in snap.timings.items()}, "counters": snap.counters}

@@ -21,7 +21,7 @@ from typing import Optional
 import numpy as np
 
 from dashboard import mapview
-from dashboard.view import MAP_SCALE, jpeg_data_url, rgb_to_bgr
+from dashboard.view import MAP_SCALE, jpeg_data_url, json_number, rgb_to_bgr, shown_number
 
 log = logging.getLogger(__name__)
 
@@ -39,14 +39,6 @@ def frame_time_s(name: str) -> Optional[float]:
         return None
     y, mo, d, h, mi, s, ms = (int(g) for g in m.groups())
     return dt.datetime(y, mo, d, h, mi, s).timestamp() + ms / 1000.0
-
-
-def _nan_none(v, digits=2):
-    """A finite float or None, rounded to `digits` (None: exact, for figures the page rounds itself)."""
-    v = float(v)
-    if not math.isfinite(v):
-        return None
-    return v if digits is None else round(v, digits)
 
 
 class MissionSource:
@@ -150,17 +142,17 @@ class MissionSource:
                             samples=self.samples, stuck=stuck, start=start,
                             pose=(c["x"][i], c["y"][i], c["yaw"][i]))
         camera, vision = self._camera(t, i)
-        fig = {key: _nan_none(c[key][i], None) for key in ("t", "x", "y", "yaw", "speed", "throttle", "brake",
+        fig = {key: shown_number(c[key][i]) for key in ("t", "x", "y", "yaw", "speed", "throttle", "brake",
                                                            "steer", "mapped", "fidelity")}
         for key in ("located", "collected"):
             v = c[key][i]
             fig[key] = int(v) if math.isfinite(v) else None
         fig.update(frame=i, mode=self.modes[i], goal=None, samples=self.samples_initial,
-                   target=None if target is None else [_nan_none(target[0], 1), _nan_none(target[1], 1)],
+                   target=None if target is None else [json_number(target[0], 1), json_number(target[1], 1)],
                    telemetry_hz=None)
-        hist = {"t": [_nan_none(v) for v in c["t"][:i + 1]]}
+        hist = {"t": [json_number(v, 2) for v in c["t"][:i + 1]]}
         for key in ("mapped", "fidelity", "located", "collected"):
-            hist[key] = [_nan_none(v) for v in c[key][:i + 1]]
+            hist[key] = [json_number(v, 2) for v in c[key][:i + 1]]
         state = {"version": i + 1, "kind": "viewer", "figures": fig,
                  "images": {"camera": jpeg_data_url(rgb_to_bgr(camera)), "vision": jpeg_data_url(rgb_to_bgr(vision)),
                             "map": jpeg_data_url(img)},
