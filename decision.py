@@ -16,8 +16,8 @@ Modes (one handler function each):
 - sample:  approach a seen (camera) or remembered (map) sample rock slowly;
 - pickup:  stop, request the pickup once when near_sample and stopped, wait;
 - search:  map complete but samples missing: peek into shadowed floor the
-  camera never saw from close (dark pockets hide small samples), then visit
-  mapped floor far from the trail (pockets at the arms' tips);
+  camera never saw from close (dark pockets hide small samples) and visit
+  mapped floor far from the trail (pockets at the arms' tips), nearest first;
 - home:    plan back to the start and stop there;
 - done:    parked at home with everything collected (or time is up).
 
@@ -569,8 +569,8 @@ def mode_forward(rover, nav, s):
 
 
 def mode_search(rover, nav, s):
-    """Map complete, samples missing: peek into shadowed pockets, then visit mapped floor far from
-    the trail; None when nothing is left."""
+    """Map complete, samples missing: peek into shadowed pockets and visit mapped floor far from
+    the trail, nearest first; None when nothing is left."""
     if nav.path_goal is None or nav.path_goal[0] not in ("peek", "search") or _needs_replan(nav, s):
         _plan_search(rover, nav, s)
     if not nav.search_left or nav.path_goal is None or len(nav.path_xy) < 2:
@@ -900,9 +900,10 @@ def _plan_search(rover, nav, s):
     cell = grid.world_to_cell(s.pos)
     _open_around_rover(cost, cell)
     dist, parent = astar.distance_field(cost, cell)
-    kind, goal = "peek", _peek_goal(rover, nav, s, free, dist)
-    if goal is None:
-        kind, goal = "search", explore.search_target(free, nav.visits.visited(), nav.search_done, dist)
+    chosen = explore.nearer_search_goal(_peek_goal(rover, nav, s, free, dist),
+                                        explore.search_target(free, nav.visits.visited(), nav.search_done, dist),
+                                        dist)
+    kind, goal = chosen if chosen is not None else ("search", None)
     if goal is None:
         nav.search_left = False
         log.info("sample search finished at t=%.1f", s.t)
@@ -961,10 +962,14 @@ def _choose_rock(rover, nav, s):
         xy = (s.pos[0] + dist * math.cos(yaw + ang), s.pos[1] + dist * math.sin(yaw + ang))
         same = nav.rock_target is not None and math.hypot(xy[0] - nav.rock_target[0],
                                                           xy[1] - nav.rock_target[1]) < ROCK_SAME_M
-        nearer = nav.rock_target is not None and dist < math.hypot(
-            nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1]) - ROCK_SAME_M
+        target_d = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1]) \
+            if nav.rock_target is not None else math.inf
+        nearer = dist < target_d - ROCK_SAME_M
+        # the rover is (nearly) at the remembered spot and the camera does not show the rock there:
+        # the estimate was off (a far sighting can be 2-3 m out), so trust the rock the camera sees
+        lost = target_d <= SAMPLE_VISUAL_M and s.t - nav.rock_seen_time > SAMPLE_VISION_MEMORY_S
         if dist <= ROCK_CHASE_M and not _rock_is_known_done(nav, xy, s.t) and (
-                nav.rock_target is None or same or nearer):
+                nav.rock_target is None or same or nearer or lost):
             if nav.rock_target is None:
                 nav.rock_since = s.t
                 nav.rock_close_since = None

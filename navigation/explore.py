@@ -190,6 +190,22 @@ def search_target(free, visited, done, dist):
     return divmod(k, free.shape[1])
 
 
+def nearer_search_goal(peek, far, dist):
+    """("peek" | "search", cell) for whichever of the best pocket peek and the best far-floor cell
+    is nearer by path, or None when neither exists.
+
+    Both are places a small sample may hide; the search visits them nearest first. Peeks used to
+    go first wherever they were: on seed 0 the rover stood 4 m from the unsearched tip of the
+    north arm (where the sixth sample lay) and drove 180 m to a peek at the south tip first.
+    """
+    options = [(float(dist[cell]), kind, cell) for kind, cell in (("peek", peek), ("search", far))
+               if cell is not None and np.isfinite(dist[cell])]
+    if not options:
+        return None
+    _cost, kind, cell = min(options, key=lambda o: o[0])
+    return kind, cell
+
+
 def ignored_frontiers(free, unknown, ignored, dist, obstacle=None, seen_close=None):
     """Reachable frontier clusters that only the ignore mask hides (same layout as frontier_targets).
 

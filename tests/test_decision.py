@@ -320,3 +320,16 @@ def test_stretched_deadline_ends_when_the_search_has_nowhere_left_to_go():
     r.nav.explored = True
     decision.decision_step(r)
     assert r.nav.path_goal is not None and r.nav.path_goal[0] == "home"
+
+
+def test_a_rock_seen_beside_a_wrong_remembered_spot_is_chased():
+    """Seed 0 at 15 fps: the remembered rock spot was 2.1 m off; standing on it, the rover turned in
+    place for 20 s ignoring the rock its camera showed (neither 'same' nor 2 m nearer)."""
+    r = make_rover(pos=(97.0, 76.8), yaw=270.0)
+    r.nav.rock_target = (97.0, 76.8)  # the rover stands on the remembered spot
+    r.nav.rock_since, r.nav.rock_seen_time = 0.0, 0.0  # last seen long ago
+    r.rock_angles, r.rock_dists = np.full(5, math.radians(10.0)), np.full(5, 2.1)  # the real rock, 2.1 m ahead
+    decision.decision_step(r)
+    tx, ty = r.nav.rock_target
+    assert math.hypot(tx - 97.0, ty - 76.8) > 1.5  # now heading for the rock in view
+    assert r.nav.rock_seen_time == r.total_time

@@ -293,3 +293,16 @@ def test_search_goes_to_the_nearest_floor_far_enough_from_the_trail():
     assert explore.search_target(free, visited, done, dist)[1] >= 120
     visited[90:111, 50:151] = True  # every cell driven over: nothing left
     assert explore.search_target(free, visited, np.zeros((200, 200), bool), dist) is None
+
+
+def test_search_visits_the_nearer_of_a_pocket_peek_and_far_floor():
+    """Seed 0 stood 4 m from an arm's unsearched tip and went to a peek 180 m away first."""
+    dist = np.full((200, 200), np.inf)
+    dist[10, 10], dist[190, 100] = 4.0, 180.0
+    assert explore.nearer_search_goal((190, 100), (10, 10), dist) == ("search", (10, 10))
+    dist[10, 10] = 200.0
+    assert explore.nearer_search_goal((190, 100), (10, 10), dist) == ("peek", (190, 100))
+    assert explore.nearer_search_goal(None, (10, 10), dist) == ("search", (10, 10))
+    assert explore.nearer_search_goal((190, 100), None, dist) == ("peek", (190, 100))
+    assert explore.nearer_search_goal((50, 50), None, dist) is None  # unreachable
+    assert explore.nearer_search_goal(None, None, dist) is None

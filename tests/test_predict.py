@@ -165,6 +165,21 @@ def test_all_samples_in_but_an_arm_given_up_is_explored_before_going_home(abando
         assert goal[0] == "home"
 
 
+def test_a_frontier_behind_cells_remembered_as_stuck_is_still_explored():
+    """Stuck memory across the only way into an arm must not make the map look complete."""
+    r = _rover_with_abandoned_arm()
+    r.samples_remaining = 0
+    r.nav.blocked_at[79:92, 118:121] = r.total_time  # stuck there just now: across the arm, walls included
+    goal = None
+    for _ in range(40):
+        r.total_time += 0.1
+        decision.decision_step(r)
+        goal = r.nav.path_goal
+        if goal is not None and goal[1] is not None:
+            break
+    assert not r.nav.explored and goal[0] == "frontier" and abs(goal[1][1] - 140) <= 2
+
+
 # ------------------------------------------------------------------ nook approach
 def _nook():
     """Open floor x 80..120, y 80..100, and a 2 m wide nook going east at y 90..91 to x 126; sample at its end."""
