@@ -480,9 +480,17 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                 s = g_first
                 jump_from = g_last
                 jump_to = prev_s
-                g_first = -1.0
-                g_last = -1.0
-                g_bottom = 1e9
+                s_reach = (g_bottom - oz) * table[7, v] if oz < g_bottom else 0.0
+                if k > 0.0 and s_reach > s:
+                    # below the passage's lowest rock bottom until it climbs to it: free until there
+                    # (a camera under an overhang would otherwise march every upward ray from itself);
+                    # the skipped stretch stays recorded as a passage for the ray above
+                    s = min(s_reach, prev_s)
+                    g_last = min(g_last, s)
+                else:
+                    g_first = -1.0
+                    g_last = -1.0
+                    g_bottom = 1e9
             else:
                 s = prev_s
             s_free = s
