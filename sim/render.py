@@ -44,6 +44,7 @@ DARK_LUT_STEP_M = 0.02  # distance resolution of the distance-darkening table, m
 DARK_LUT_MAX_M = 200.0  # the table's reach (farther hits use its last entry), m
 TEX_GROUND, TEX_COLOUR = 0, 1  # channels of the baked texel array (0.1 m height, 0xBBGGRR bits)
 SLAB_LO, SLAB_HI = 0, 1  # channels of the baked slab array (rock bottom, rock top), m
+COARSE_MAX, COARSE_GROUND, COARSE_BOTTOM, COARSE_FLAT = 0, 1, 2, 3  # channels of the baked coarse-cell array
 WEIGHT_BITS = 13  # fixed-point bits of the colour blend weights (blend error < 0.1 grey level)
 LANE_BITS = 21  # bits per channel lane of a packed colour: 255 x 2**13 x (1 + rounding) fits
 GAP_MIN_M = 0.3  # rock bottom this far above the ground leaves a see-through gap, m
@@ -240,7 +241,9 @@ def bake_rasters(world: World):
     # a level floor without rock: the kernel intersects such cells analytically
     cflat = np.where((tmax == tmin) & ~rock, tmax, np.nan).astype(np.float32)
     assert cflat.shape == (cmax_shape, cmax_shape)
-    return {"cflat": cflat, "bmax": _block_max(cmax, BLOCK_CELLS),
+    # the four per-cell figures the kernel reads on entering a coarse cell, side by side (one cache line)
+    coarse = np.stack([cmax, cground, cbottom, cflat], axis=-1).astype(np.float32)
+    return {"cflat": cflat, "coarse": coarse, "bmax": _block_max(cmax, BLOCK_CELLS),
             **_kernel_rasters(ground, slab_lo, slab_hi, colour_ground), "rock64": pack_rgb(colour_rock),
             "top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
             "has_gap": has_gap, "colour": colour_ground, "colour_rock": colour_rock, "cmax": cmax,
@@ -417,8 +420,8 @@ def _spread(c):
 
 
 @njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})
-def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u, slab, rock64, cmax,
-                   cground, cbottom, cflat, bmax, block_m, cell, coarse_m, origin,
+def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u, slab, rock64, coarse,
+                   bmax, block_m, cell, coarse_m, origin,
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, world_size, dark_lut, dark_lut_step):
     """Column-wise raymarch into row-major (H, W, 3) image and (H, W) depth (module docstring).
@@ -434,7 +437,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
     inv_coarse = 1.0 / coarse_m
     inv_block = 1.0 / block_m
     n = slab.shape[0]
-    nc = cmax.shape[0]
+    nc = coarse.shape[0]
     nb = bmax.shape[0]
     ox, oy, oz = origin[0], origin[1], origin[2]
     inv_lut_step = 1.0 / dark_lut_step
@@ -494,7 +497,6 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
             else:
                 s = prev_s
             s_free = s
-            f_free = -1.0  # height above the ground at s_free when a fine step measured it, else < 0
             state = 0
             hit = 0  # 0 none, 1 surface, 2 sky, 3 far
             x = 0.0
@@ -509,7 +511,6 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                     if s < jump_to:
                         s = jump_to
                         s_free = s
-                        f_free = -1.0
                     jump_from = -1.0
                 if s > far_m:
                     hit = 3
@@ -535,14 +536,13 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                                 if oz + (s + ds) * k > bm:
                                     s += ds
                                     s_free = s
-                                    f_free = -1.0
                                     continue
                             ci_c = ci
                             ri_c = ri
-                            cm = cmax[ri, ci]
-                            cg = cground[ri, ci]
-                            cb = cbottom[ri, ci]
-                            gz = cflat[ri, ci]
+                            cm = coarse[ri, ci, COARSE_MAX]
+                            cg = coarse[ri, ci, COARSE_GROUND]
+                            cb = coarse[ri, ci, COARSE_BOTTOM]
+                            gz = coarse[ri, ci, COARSE_FLAT]
                             rock_here = cb < 1e8
                         cell_end = s + _exit_dist(x, y, inv_hx, inv_hy, ci, ri, coarse_m)
                         z_exit = oz + cell_end * k
@@ -564,13 +564,11 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                                     break
                             s = cell_end
                             s_free = s
-                            f_free = -1.0
                             continue
                     if z > cm:
                         if z_exit > cm:  # above everything to the cell's end
                             s = cell_end
                             s_free = s
-                            f_free = -1.0
                             continue
                     elif cg < z < cb and cg < z_exit < cb:  # in the free band under a rock
                         if cb < 1e8:  # passing under an overhang
@@ -580,7 +578,6 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                             g_bottom = min(g_bottom, cb)
                         s = cell_end
                         s_free = s
-                        f_free = -1.0
                         continue
                     # fine step: terrain (bilinear) or the rock slab of the nearest 0.1 m cell
                     g = _ground_in(terrain, inv_tcell, x, y)
@@ -622,7 +619,6 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                         g_last = max(g_last, s)
                         g_bottom = min(g_bottom, lo_r)
                 s_free = s
-                f_free = z - g
                 s += step_min + step_k * s
             if hit == 1:
                 lo = s_free
@@ -784,7 +780,7 @@ class Renderer:
         terrain = self._terrain
         _render_kernel(img, depth, np.ascontiguousarray(rot), self.ray_a, self.ray_b, terrain, 1.0 / float(self.world.terrain_cell_m), b["tex"],
                        b["tex_u"],
-                       b["slab"], b["rock64"], b["cmax"], b["cground"], b["cbottom"], b["cflat"], b["bmax"],
+                       b["slab"], b["rock64"], b["coarse"], b["bmax"],
                        BLOCK_CELLS * COARSE_CELL_M, float(self.world.rock_cell_m), COARSE_CELL_M,
                        origin, FAR_M, FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self.zmax,
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
