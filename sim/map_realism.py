@@ -8,7 +8,9 @@ navigable).  Each figure is given over all frames and over the frames where the 
 places side by side (real map | twin map | disagreement) and metrics.json lists them.
 
     python -m sim.map_realism [--log megalphian|test_dataset|PATH] [--stride 2]
-                              [--shadows off|on|both] [--out out/map-realism]
+                              [--shadows off|on|both] [--tracks on|off] [--out out/map-realism]
+
+Tyre tracks are drawn into the twin frames along the replayed trajectory, as in the real frames.
 """
 from __future__ import annotations
 
@@ -70,19 +72,29 @@ def map_iou(a, b) -> float:
 
 
 def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = False, truth=None, maps=None,
-            moving: bool = True):
+            moving: bool = True, tracks: bool = True):
     """Replay real and twin frames of one log; returns (MapRealism, real worldmap, twin worldmap).
 
     truth: map_bw as load_ground_truth gives it (read from ../shared when None).
     maps: a dict to receive the moving-frames worldmaps too ("real_moving", "twin_moving").
     moving: also replay the moving frames alone (costs a second perception pass on them).
+    tracks: draw the tyre tracks laid along the whole logged drive into the twin frames (the real ones show them).
     """
     data = read_log(log_path)
     if truth is None:
         truth = load_ground_truth(shared_data.ground_truth_map_path())
     renderer = Renderer(world)
     rovers = {k: RoverState() for k in ("real", "twin", "real_moving", "twin_moving")}
-    frames = data.frames[:: max(1, int(stride))]
+    used = range(0, len(data.frames), max(1, int(stride)))
+    frames = [data.frames[i] for i in used]
+    laid = {}
+    if tracks:
+        from replay.runner import frame_time
+        from sim.tracks import replay_quads
+
+        times = [frame_time(f) for f in data.frames]
+        laid = dict(replay_quads([(f.x, f.y, f.yaw) for f in data.frames], None if None in times else times,
+                                 world, used))
     it = frames
     if progress:
         from tqdm import tqdm
@@ -94,7 +106,7 @@ def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = Fals
         if real is None:
             continue
         pose = (frame.x, frame.y, frame.yaw, signed_angle(frame.pitch), signed_angle(frame.roll))
-        twin = jpeg_roundtrip(renderer.render(pose))
+        twin = jpeg_roundtrip(renderer.render(pose, tracks=laid.get(used[i])))
         now = i * FALLBACK_FRAME_PERIOD_S
         is_moving = moving and abs(frame.speed) >= MOVING_MIN_SPEED
         for key, rgb in (("real", real), ("twin", twin)):
@@ -170,6 +182,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default="out/map-realism", help="folder for metrics.json and the map images")
     p.add_argument("--shadows", choices=("off", "on", "both"), default="off",
                    help="twin cast shadows: off (default, as most real drives), on (as test_dataset) or both")
+    p.add_argument("--tracks", choices=("on", "off"), default="on",
+                   help="draw tyre tracks along the replayed drive (on, as the real frames show them)")
     a = parse_with_logging(p, argv)
     if a.stride < 1:
         p.error("--stride must be at least 1")
@@ -182,7 +196,7 @@ def main(argv=None) -> int:
 
     out = Path(a.out)
     settings = ("off", "on") if a.shadows == "both" else (a.shadows,)
-    payload = {"stride": a.stride, "moving_min_speed_m_s": MOVING_MIN_SPEED}
+    payload = {"stride": a.stride, "tracks": a.tracks, "moving_min_speed_m_s": MOVING_MIN_SPEED}
     try:
         log_path = find_log(a.log)
         payload["log"] = str(log_path)
@@ -192,7 +206,7 @@ def main(argv=None) -> int:
         for setting in settings:
             maps = {}
             result, real_map, twin_map = compare(log_path, with_shadows(world, setting == "on"), a.stride,
-                                                 progress=True, truth=truth, maps=maps)
+                                                 progress=True, truth=truth, maps=maps, tracks=a.tracks == "on")
             results[setting] = result
             places = worst_places(real_map, twin_map)
             payload[f"shadows_{setting}"] = {**asdict(result), "mapped_gap": result.mapped_gap,

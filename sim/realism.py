@@ -8,7 +8,10 @@ and over the frames where the rover moves (|speed| >= MOVING_MIN_SPEED; keys wit
 in metrics.json), per shadows setting, with side-by-side images of the worst places.
 
     python -m sim.realism [--log test_dataset|NAME|PATH] [--stride 1] [--shadows off|on|both]
-                          [--out out/realism] [--examples 6]
+                          [--tracks on|off] [--out out/realism] [--examples 6]
+
+Tyre tracks are drawn along the replayed trajectory (on by default), as the real simulator drew
+them in the logged frames: without them the twin is judged on a cleaner floor than the real one.
 
 NAME is a folder under ../shared/real-logs; test_dataset was recorded with cast shadows (and
 the colour table was fitted on it), the other shared drives without.
@@ -24,6 +27,7 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -56,6 +60,7 @@ class LoggedFrame:
     image_path: Path
     pose: tuple  # (x, y, yaw, pitch, roll), degrees, pitch/roll signed
     speed: float = 0.0  # m/s as logged
+    time: float | None = None  # s, from the frame's file name (None when it carries none)
 
     @property
     def moving(self) -> bool:
@@ -75,16 +80,32 @@ def read_test_dataset(folder: Path | None = None) -> list:
             name = Path(row["Path"].replace("\\", "/")).name
             pose = (float(row["X_Position"]), float(row["Y_Position"]), float(row["Yaw"]),
                     _signed(float(row["Pitch"])), _signed(float(row["Roll"])))
-            frames.append(LoggedFrame(folder / "IMG" / name, pose, float(row["Speed"])))
+            frames.append(LoggedFrame(folder / "IMG" / name, pose, float(row["Speed"]), _name_time(name)))
     return frames
+
+
+def _name_time(name: str):
+    from replay.runner import frame_time
+
+    return frame_time(SimpleNamespace(image_path=Path(name)))
 
 
 def read_frames(log_path) -> list:
     """Logged frames of any simulator log (replay.log_format's reader: odd line ends, corrupt rows, duplicates)."""
     from replay.log_format import read_log
 
-    return [LoggedFrame(f.image_path, (f.x, f.y, f.yaw, _signed(f.pitch), _signed(f.roll)), f.speed)
+    from replay.runner import frame_time
+
+    return [LoggedFrame(f.image_path, (f.x, f.y, f.yaw, _signed(f.pitch), _signed(f.roll)), f.speed, frame_time(f))
             for f in read_log(log_path).frames]
+
+
+def replay_tracks(frames: list, keep, world) -> dict:
+    """{index: tyre-track quads in that frame} for the indices in `keep`, laid along all `frames`."""
+    from sim.tracks import replay_quads
+
+    times = [f.time for f in frames]
+    return dict(replay_quads([f.pose[:3] for f in frames], None if None in times else times, world, keep))
 
 
 def standard_warp():
@@ -129,8 +150,10 @@ def read_rgb(path: Path) -> np.ndarray:
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
-def evaluate(renderer: Renderer, frames: list, progress: bool = False, keep=()):
-    """Per-frame IoUs (near, whole) and the images of the frames listed in `keep`."""
+def evaluate(renderer: Renderer, frames: list, progress: bool = False, keep=(), tracks=None):
+    """Per-frame IoUs (near, whole) and the images of the frames listed in `keep`.
+
+    tracks: tyre-track quads per frame (a list as long as `frames`), or None for a floor without tracks."""
     m, fov, near = standard_warp()
     near_iou, whole_iou, kept = [], [], {}
     it = frames
@@ -140,7 +163,7 @@ def evaluate(renderer: Renderer, frames: list, progress: bool = False, keep=()):
         it = tqdm(frames, desc="realism", unit="frame")
     for i, frame in enumerate(it):
         real = read_rgb(frame.image_path)
-        sim = jpeg_roundtrip(renderer.render(frame.pose))
+        sim = jpeg_roundtrip(renderer.render(frame.pose, tracks=None if tracks is None else tracks[i]))
         real_nav = warped_navigable(real, m)
         sim_nav = warped_navigable(sim, m)
         near_iou.append(iou(real_nav, sim_nav, near))
@@ -210,13 +233,21 @@ def _caption(rgb: np.ndarray, text: str) -> np.ndarray:
 
 
 def measure(log_path, world, stride: int = 1, examples: int = DEFAULT_EXAMPLES, out: Path | None = None,
-            progress: bool = False) -> dict:
-    """Figures for one log with one world (its cast_shadows setting), and the worst places' images in `out`."""
-    frames = read_frames(log_path)[:: max(1, int(stride))]
+            progress: bool = False, tracks: bool = True) -> dict:
+    """Figures for one log with one world (its cast_shadows setting), and the worst places' images in `out`.
+
+    tracks: draw the tyre tracks laid along the whole logged drive (every row, not only the used ones)."""
+    every = read_frames(log_path)
+    used = list(range(0, len(every), max(1, int(stride))))
+    frames = [every[i] for i in used]
     if not frames:
         raise ValueError(f"no usable frames in {log_path}")
+    quads = None
+    if tracks:
+        laid = replay_tracks(every, used, world)
+        quads = [laid[i] for i in used]
     renderer = Renderer(world)
-    near_iou, whole_iou, _ = evaluate(renderer, frames, progress=progress)
+    near_iou, whole_iou, _ = evaluate(renderer, frames, progress=progress, tracks=quads)
     summary = summarise(near_iou, whole_iou, [f.moving for f in frames])
     shadows = "on" if world.cast_shadows else "off"
     places = []
@@ -228,7 +259,7 @@ def measure(log_path, world, stride: int = 1, examples: int = DEFAULT_EXAMPLES, 
                  "near_5m_iou": round(float(near_iou[i]), 3), "whole_view_iou": round(float(whole_iou[i]), 3)}
         if out is not None:
             real = read_rgb(f.image_path)
-            sim = jpeg_roundtrip(renderer.render(f.pose))
+            sim = jpeg_roundtrip(renderer.render(f.pose, tracks=None if quads is None else quads[i]))
             img = side_by_side(real, sim, warped_navigable(real, m) & fov, warped_navigable(sim, m) & fov)
             name = f"worst_{rank + 1}_shadows_{shadows}.png"
             _write_png(Path(out) / name, _caption(img, f"({f.pose[0]:.1f}, {f.pose[1]:.1f}) yaw {f.pose[2]:.0f}  "
@@ -256,6 +287,8 @@ def main(argv=None):
     parser.add_argument("--stride", type=int, default=1, help="use every N-th frame")
     parser.add_argument("--shadows", choices=("off", "on", "both"), default="off",
                         help="twin cast shadows: off (default, as most real drives), on (as test_dataset) or both")
+    parser.add_argument("--tracks", choices=("on", "off"), default="on",
+                        help="draw tyre tracks along the replayed drive (on, as the real frames show them)")
     parser.add_argument("--out", default="out/realism", help="folder for side-by-side images and metrics")
     parser.add_argument("--examples", type=int, default=DEFAULT_EXAMPLES, help="worst places written per setting")
     args = parse_with_logging(parser, argv)
@@ -272,15 +305,17 @@ def main(argv=None):
         world = load_real_world()
         settings = ("off", "on") if args.shadows == "both" else (args.shadows,)
         out = Path(args.out)
-        results = {s: measure(log_path, with_shadows(world, s == "on"), args.stride, args.examples, out, progress=True)
+        results = {s: measure(log_path, with_shadows(world, s == "on"), args.stride, args.examples, out, progress=True,
+                                tracks=args.tracks == "on")
                    for s in settings}
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return 2
-    payload = {"log": str(log_path), "stride": args.stride, "moving_min_speed_m_s": MOVING_MIN_SPEED,
+    payload = {"log": str(log_path), "stride": args.stride, "tracks": args.tracks, "moving_min_speed_m_s": MOVING_MIN_SPEED,
                **{f"shadows_{s}": r for s, r in results.items()}}
     _write_json(out / "metrics.json", payload)
-    print(f"realism of {log_path} (navigable IoU real vs twin, standard warp, every {args.stride}. frame)")
+    print(f"realism of {log_path} (navigable IoU real vs twin, standard warp, every {args.stride}. frame, "
+          f"tyre tracks {args.tracks})")
     print(f"{'shadows':<8} {'frames':>6} {'moving':>6} {'5 m all':>8} {'5 m moving':>10} {'whole all':>9} {'whole moving':>12}")
     for s, r in results.items():
         print(f"{s:<8} {r['frames']:>6} {r.get('moving_frames', 0):>6} {r['near_5m_mean']:>8.3f} "

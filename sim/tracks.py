@@ -34,6 +34,9 @@ WHEEL_CLIMB_M = 0.5  # a rock top higher than this above the terrain is not stoo
 TINT = (0.659, 0.616, 0.562)  # Tracks.mat colour, 0..1 RGB
 ALPHA_CUTOFF = 0.5  # alpha below this is cut out (not drawn), 0..1
 TEXTURE_NAME = "tyre_track_texture.png"  # file under shared world/
+# --- laying tracks along a logged drive (sim.realism, sim.map_realism) ---
+REPLAY_RENDER_FPS = 30.0  # the simulator's render rate at the qualities the logs used (tracks are laid per frame), Hz
+REPLAY_MAX_GAP_S = 1.0  # rows further apart than this (a pause or a cut) are not interpolated between, s
 
 # --- the procedural stand-in tread (only when the shared texture is absent) ---
 TREAD_SIZE = 128  # texels per side, like the real texture
@@ -171,3 +174,30 @@ def tyre_tracks(twin) -> TyreTracks:
         tracks._physics = twin.physics
     s = twin.physics.state
     return tracks.update(s.x, s.y, s.yaw)
+
+
+def replay_quads(poses, times=None, world=None, keep=None):
+    """Tyre tracks along a logged drive: yields (row index, quads array) for every row in `keep`
+    (all rows when None), with the tracks the real simulator would show in that row's frame.
+
+    poses: (x, y, yaw_deg) per logged row, in order. times: seconds per row (None: unknown).
+    A log is written at 15-21 Hz while the simulator lays tracks in each rendered frame (~30 Hz),
+    so poses are interpolated between rows at REPLAY_RENDER_FPS when the rows' times are known;
+    without times, one update per row. All wheels are taken as grounded.
+    """
+    tracks = TyreTracks(world)
+    keep = None if keep is None else set(keep)
+    prev = prev_t = None
+    for i, (x, y, yaw) in enumerate(poses):
+        t = None if times is None else times[i]
+        if prev is not None and t is not None and prev_t is not None and 0.0 < t - prev_t <= REPLAY_MAX_GAP_S:
+            steps = int(math.ceil((t - prev_t) * REPLAY_RENDER_FPS - 1e-6))
+            dyaw = (yaw - prev[2] + 180.0) % 360.0 - 180.0
+            for k in range(1, steps):
+                f = k / steps
+                tracks.update(prev[0] + f * (x - prev[0]), prev[1] + f * (y - prev[1]), prev[2] + f * dyaw)
+        tracks.update(x, y, yaw)
+        prev, prev_t = (x, y, yaw), t
+        if keep is None or i in keep:
+            yield i, tracks.quads
+

@@ -95,3 +95,42 @@ def test_real_tread_texture_is_read_at_run_time(world_dir):
     alpha = tracks.load_tread_alpha()
     assert alpha.shape == (128, 128)
     assert (alpha >= 0.5).mean() == pytest.approx(0.40, abs=0.01)
+
+
+def test_replay_lays_tracks_between_logged_rows_at_the_render_rate():
+    """A log at 15 Hz, 2 m/s east: rows are 0.133 m apart, the simulator rendered (and laid) at 30 Hz,
+    so the replay interpolates and lays quads about every 0.067 m; without row times, one per row."""
+    rows = 31
+    poses = [(100.0 + 2.0 / 15 * i, 100.0, 0.0) for i in range(rows)]
+    times = [i / 15 for i in range(rows)]
+    with_times = dict(tracks.replay_quads(poses, times))
+    without = dict(tracks.replay_quads(poses))
+    assert sorted(with_times) == list(range(rows))
+    last = with_times[rows - 1]
+    assert len(last) == 2 * (2 * (rows - 1) + 1)  # both wheels, every interpolated frame
+    assert len(without[rows - 1]) == 2 * rows
+    gaps = np.diff(np.sort(last[last[:, 1] > 100.0][:, 0]))
+    assert gaps.max() < 0.07
+    # only the asked-for rows are yielded; a pause longer than REPLAY_MAX_GAP_S is not bridged
+    kept = dict(tracks.replay_quads(poses, times, keep=[5, 9]))
+    assert sorted(kept) == [5, 9] and np.array_equal(kept[9], with_times[9])
+    paused = dict(tracks.replay_quads([(100.0, 100.0, 0.0), (104.0, 100.0, 0.0)], [0.0, 5.0]))
+    assert len(paused[1]) == 4
+
+
+def test_realism_replay_draws_the_tracks_of_the_logged_drive(flat_renderer):
+    """sim.realism renders each used frame with the tracks laid along ALL logged rows before it (also the
+    rows a stride skips): driving east then looking back west shows them; --tracks off shows bare sand."""
+    from pathlib import Path
+
+    from sim import realism
+
+    out = [realism.LoggedFrame(Path(f"f{i}.jpg"), (98.0 + 0.1 * i, 100.0, 0.0, 0.0, 0.0), 2.0, i / 20)
+           for i in range(41)]
+    out.append(realism.LoggedFrame(Path("back.jpg"), (102.6, 100.0, 180.0, 0.0, 0.0), 0.0, 2.1))
+    used = [0, len(out) - 1]  # a stride that skips the whole drive
+    laid = realism.replay_tracks(out, used, flat_renderer.world)
+    assert sorted(laid) == used and len(laid[used[-1]]) > 100
+    img = flat_renderer.render(out[-1].pose, tracks=laid[used[-1]])
+    plain = flat_renderer.render(out[-1].pose)
+    assert (~np.all(img[100:] > 160, axis=2)).sum() > 300 and np.all(plain[100:] > 160)
