@@ -85,8 +85,8 @@ def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = Fals
         truth = load_ground_truth(shared_data.ground_truth_map_path())
     renderer = Renderer(world)
     rovers = {k: RoverState() for k in ("real", "twin", "real_moving", "twin_moving")}
-    used = range(0, len(data.frames), max(1, int(stride)))
-    frames = [data.frames[i] for i in used]
+    rows = range(0, len(data.frames), max(1, int(stride)))
+    frames = [data.frames[i] for i in rows]
     laid = {}
     if tracks:
         from replay.runner import frame_time
@@ -94,7 +94,7 @@ def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = Fals
 
         times = [frame_time(f) for f in data.frames]
         laid = dict(replay_quads([(f.x, f.y, f.yaw) for f in data.frames], None if None in times else times,
-                                 world, used))
+                                 world, rows))
     it = frames
     if progress:
         from tqdm import tqdm
@@ -106,7 +106,7 @@ def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = Fals
         if real is None:
             continue
         pose = (frame.x, frame.y, frame.yaw, signed_angle(frame.pitch), signed_angle(frame.roll))
-        twin = jpeg_roundtrip(renderer.render(pose, tracks=laid.get(used[i])))
+        twin = jpeg_roundtrip(renderer.render(pose, tracks=laid.get(rows[i])))
         now = i * FALLBACK_FRAME_PERIOD_S
         is_moving = moving and abs(frame.speed) >= MOVING_MIN_SPEED
         for key, rgb in (("real", real), ("twin", twin)):
