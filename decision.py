@@ -482,6 +482,7 @@ def _begin_recovery(nav, s, why, noticed_after_s):
     nav.progress.reset()
     nav.rotate_heading = None
     nav.plan_time = -math.inf  # replan around the blocked cells
+    nav.stage_for = None  # a rock approach that wedged is decided again, around the stuck cells
     log.info("%s at (%.1f, %.1f) t=%.1f, repeat %d, escaping %s", why, s.pos[0], s.pos[1], s.t, repeat,
              "left" if sign > 0 else "right")
 
@@ -636,9 +637,10 @@ def _arrival_point(nav, s):
 def _stage_approach(rover, nav, s, dist):
     """Command toward the rock's staging point (see navigation.approach), or None to approach normally.
 
-    Decided once per rock when it is within STAGE_DECIDE_M: a rock whose straight final run
-    from the rover is not mapped floor (a nook) is approached from a staging point with a
-    clear run in, whatever the heading the rover arrives with.
+    Decided once per rock when it is within STAGE_DECIDE_M, and again after each stuck: a rock
+    whose straight final run from the rover is not mapped floor (a nook), or runs over cells
+    the rover got stuck on, is approached from a staging point with a clear run in, whatever
+    the heading the rover arrives with.
     """
     if nav.stage_for is None or math.hypot(nav.rock_target[0] - nav.stage_for[0],
                                            nav.rock_target[1] - nav.stage_for[1]) > ROCK_SAME_M:
@@ -646,9 +648,7 @@ def _stage_approach(rover, nav, s, dist):
             return None
         free = _grids(rover)[0]
         nav.stage_for, nav.stage_done = nav.rock_target, False
-        arrival = _arrival_point(nav, s)
-        nav.stage = None if approach.direct_run_clear(free, arrival, nav.rock_target) else \
-            approach.staging_point(free, nav.rock_target, arrival)
+        nav.stage = approach.plan_approach(free, _blocked(nav, s), nav.rock_target, _arrival_point(nav, s))
         if nav.stage is not None:
             log.info("rock at (%.1f, %.1f): lining up at (%.1f, %.1f) first", *nav.rock_target, *nav.stage[:2])
     if nav.stage is None or nav.stage_done:

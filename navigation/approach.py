@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from typing import Optional, Tuple
 
+import cv2
 import numpy as np
 
 STANDOFF_M = 2.5  # staging point this far from the sample, m
@@ -26,6 +27,7 @@ STAGE_MIN_SHARE = 0.6  # a staging direction needs at least this share free (a n
 SHARE_WEIGHT = 4.0  # score per unit of free share of the run in (ranks directions before the room behind), 1/share
 LINE_STEP_M = 0.25  # spacing of the checked points along a run, m
 SIDE_PREFERENCE = 0.5  # score bonus per unit cosine toward the rover's own side (fewer detours), 0..
+WEDGED_NEAR_M = 4.0  # stuck cells this close to the sample mean the last approach wedged there, m
 
 
 def _free_at(free: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
@@ -116,3 +118,32 @@ def staging_point(free: np.ndarray, sample_xy, rover_xy=None,
             heading = math.degrees(math.atan2(-uy, -ux)) % 360.0
             best, best_score = (stage[0], stage[1], heading), score
     return best
+
+
+def plan_approach(free: np.ndarray, blocked: np.ndarray, sample_xy, arrival_xy
+                  ) -> Optional[Tuple[float, float, float]]:
+    """Staging point (x, y, heading_deg) for the final run to a sample, or None: straight in.
+
+    Cells the rover got stuck on (`blocked`) are not floor, whatever the map says: low rocks
+    beside the east nook map as floor, and the rover wedged on them from the south again and
+    again.  Once it wedged near this sample and no staging point is left on mapped floor, the
+    opening is taken to be narrower than a map cell: staging may then use cells next to mapped
+    floor (the nook's real opening reads as wall foot on the 1 m map).
+    """
+    usable = free & ~blocked
+    if direct_run_clear(usable, arrival_xy, sample_xy):
+        return None
+    stage = staging_point(usable, sample_xy, arrival_xy)
+    if stage is None and _blocked_near(blocked, sample_xy):
+        grown = cv2.dilate(free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+        stage = staging_point(grown & ~blocked, sample_xy, arrival_xy)
+    return stage
+
+
+def _blocked_near(blocked: np.ndarray, sample_xy) -> bool:
+    """Any stuck cell within WEDGED_NEAR_M of the sample?"""
+    rows, cols = np.nonzero(blocked)
+    if rows.size == 0:
+        return False
+    d = np.hypot(cols + 0.5 - float(sample_xy[0]), rows + 0.5 - float(sample_xy[1]))
+    return bool((d <= WEDGED_NEAR_M).any())

@@ -224,3 +224,32 @@ def test_east_nook_of_the_real_map_has_a_clear_staging_point_from_any_side():
         assert 145.0 < stage[0] < 148.0 and stage[1] > 109.6  # in the opening, north-west of the sample
         assert abs(predict.wrap_deg(stage[2] - 340.0)) < 20.0  # facing into the nook (east-south-east)
     assert not approach.direct_run_clear(free, (146.0, 104.0), sample)  # from the south the rocks are in the way
+
+
+def test_a_nook_approach_that_wedged_is_replanned_from_the_open_side():
+    """East-nook pattern: low rocks south of the sample map as floor (a clear straight run), the real
+    opening (west here) reads as wall foot on the 1 m map.  Once the rover got stuck on the false
+    floor, the approach must use another side, not the same run again."""
+    free = np.zeros((200, 200), bool)
+    free[80:101, 100:120] = True  # open floor
+    free[84:90, 120:123] = True  # false floor south of the sample
+    free[89:92, 119] = False  # the real opening, west of the sample, mapped as wall foot
+    sample, arrival = (121.8, 90.5), (121.5, 85.5)
+    blocked = np.zeros_like(free)
+    assert approach.plan_approach(free, blocked, sample, arrival) is None  # the map says: straight in
+    blocked[87:90, 120:123] = True  # stuck there
+    x, y, heading = approach.plan_approach(free, blocked, sample, arrival)
+    assert x < sample[0] - 2.0 and abs(y - sample[1]) < 1.0  # west of the sample, in the opening
+    assert abs(predict.wrap_deg(heading)) < 20.0  # facing east, into the nook
+    far_blocked = np.zeros_like(free)
+    far_blocked[40, 40] = True  # stuck elsewhere: no reason to doubt the map here
+    assert approach.plan_approach(free, far_blocked, sample, arrival) is None
+
+
+def test_a_stuck_during_a_rock_approach_makes_it_decided_again():
+    r = _rover_with_abandoned_arm()
+    r.nav.rock_target = r.nav.stage_for = (115.0, 85.0)
+    r.nav.stage = None
+    s = decision._read_inputs(r)
+    decision._begin_recovery(r.nav, s, "stuck", 3.0)
+    assert r.nav.stage_for is None
