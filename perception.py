@@ -78,7 +78,8 @@ MAP_RANGE_M = 9.0  # only ground within this distance votes, m
 MAP_RANGE_FALLOFF = 0.5  # vote weight at MAP_RANGE_M relative to 1 at the rover (linear), 0..1
 NAV_VOTE_WEIGHT = 1.0  # weight of one navigable top-down cell vote
 OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
-NAV_MAJORITY = 0.2  # a map cell shows navigable when the light-sand share of votes exceeds this, 0..1 (edge cells are mixed)
+NAV_MAJORITY = 0.2  # the drive map and pocket floor take a cell as navigable when the light-sand share of votes exceeds this, 0..1 (edge cells are mixed)
+SCORED_NAV_MAJORITY = 0.25  # the scored map (rover.worldmap) asks this share: sunlit wall feet pass as sand, a one-cell fringe, 0..1
 SHADE_MAJORITY = 0.5  # ...or when light plus shadowed sand make up more than this share (the weaker evidence), 0..1
 MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 FILL_MIN_NEIGHBOURS = 5  # a seen cell with at least this many of its 8 neighbours navigable shows navigable too, cells
@@ -456,15 +457,16 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
     return out
 
 
-def _majority_navigable(mem: PerceptionMemory, y0, y1, x0, x1, drive=False, dim_shade=True):
+def _majority_navigable(mem: PerceptionMemory, y0, y1, x0, x1, drive=False, dim_shade=True, scored=False):
     """(seen, navigable) bool arrays for the window by the vote-share rules alone.
 
-    ``drive`` ignores shadowed sand; ``dim_shade=False`` ignores only its darker part.
+    ``drive`` ignores shadowed sand; ``dim_shade=False`` ignores only its darker part;
+    ``scored`` asks the light-sand share of the scored map (SCORED_NAV_MAJORITY).
     """
     nav = mem.nav_votes[y0:y1, x0:x1]
     total = nav + mem.obs_votes[y0:y1, x0:x1]
     seen = total >= MIN_CELL_VOTES
-    is_nav = seen & (nav > NAV_MAJORITY * total)
+    is_nav = seen & (nav > (SCORED_NAV_MAJORITY if scored else NAV_MAJORITY) * total)
     if not drive:
         is_nav |= seen & (_sand_votes(mem, y0, y1, x0, x1, dim_shade) > SHADE_MAJORITY * total)
     return seen, is_nav
@@ -483,7 +485,7 @@ def _filled_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
     surrounds on most sides is a notch the votes left, not a wall.
     """
     py0, py1, px0, px1 = _grown(y0, y1, x0, x1)
-    seen, is_nav = _majority_navigable(mem, py0, py1, px0, px1)
+    seen, is_nav = _majority_navigable(mem, py0, py1, px0, px1, scored=True)
     neighbours = cv2.filter2D(is_nav.view(np.uint8), cv2.CV_16S, _EIGHT_NEIGHBOURS, borderType=cv2.BORDER_CONSTANT)
     total = mem.nav_votes[py0:py1, px0:px1] + mem.obs_votes[py0:py1, px0:px1]
     sand = _sand_votes(mem, py0, py1, px0, px1)

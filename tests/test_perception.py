@@ -243,7 +243,12 @@ def test_sand_in_shadow_is_mapped_but_not_driven_on():
     scored = r.worldmap[:, :, 2] > 0
     drive = P.drive_map(r)
     driven = drive[:, :, 2] > 0
-    assert driven.any() and not (driven & ~scored).any()  # the drive map is the stricter one
+    assert driven.any()
+    # the drive map is the stricter one about shadowed sand; it only keeps the light-sand fringe
+    # cells (share between NAV_MAJORITY and SCORED_NAV_MAJORITY) that the scored map turns down
+    mem = P.get_memory(r)
+    light_share = mem.nav_votes / np.maximum(mem.nav_votes + mem.obs_votes, 1e-9)
+    assert (light_share[driven & ~scored] <= P.SCORED_NAV_MAJORITY + 1e-6).all()
     shaded = scored & ~driven
     ys, xs = np.nonzero(shaded)
     assert ys.size >= 10 and ys.min() >= 100 and xs.min() >= 100  # ahead and to the left
@@ -267,7 +272,10 @@ def test_darker_shadowed_sand_is_scored_but_not_a_pocket_to_peek_into():
     scored = r.worldmap[:, :, 2] > 0
     pocket = P.pocket_floor(r)
     driven = P.drive_map(r)[:, :, 2] > 0
-    assert not (pocket & ~scored).any() and not (driven & ~pocket).any()  # each map is stricter than the last
+    assert not (driven & ~pocket).any()  # each map is stricter than the last about shadowed sand ...
+    mem = P.get_memory(r)  # ... while only the scored map turns down light-sand fringe cells
+    light_share = mem.nav_votes / np.maximum(mem.nav_votes + mem.obs_votes, 1e-9)
+    assert (light_share[pocket & ~scored] <= P.SCORED_NAV_MAJORITY + 1e-6).all()
     deep, light = scored & ~pocket, pocket & ~driven
     assert deep.sum() >= 5 and light.sum() >= 5
     assert np.nonzero(deep)[0].mean() > np.nonzero(light)[0].mean()  # the deep shade is the one farther left
@@ -309,6 +317,42 @@ def test_scored_map_needs_a_majority_of_shadowed_sand_but_drive_map_ignores_it(l
     assert (scored[2] == 255) == scored_nav and (drive[2] == 255) == drive_nav
     seen = light + shade + dark >= P.MIN_CELL_VOTES
     assert (scored[0] == 255) == (seen and not scored_nav)
+
+
+@pytest.mark.parametrize("light_share", [0.22, 0.24])
+def test_scored_map_rejects_a_fringe_cell_the_drive_map_still_drives_on(light_share):
+    """A wall-foot cell with a little light sand (sunlit slope): not floor on the scored map (issue 27).
+
+    Its light share is above NAV_MAJORITY, so the planner's map keeps it as before, but below
+    SCORED_NAV_MAJORITY, so the scored map calls it wall.
+    """
+    assert P.NAV_MAJORITY < light_share < P.SCORED_NAV_MAJORITY
+    mem = _memory_with_votes(100 * light_share, 0, 100 * (1 - light_share))
+    scored = P.render_worldmap(mem)[100, 100]
+    assert scored[2] == 0 and scored[0] == 255
+    assert P.render_worldmap(mem, drive=True)[100, 100, 2] == 255
+
+
+def _track_frame():
+    """Level frame: light sand floor from row 84 down (to ~5.8 m ahead), crossed by two darker tyre tracks, dark wall above."""
+    img = np.empty((160, 320, 3), np.uint8)
+    img[:84] = _noisy((70, 55, 45), 8.0, shape=(84, 320))
+    img[84:] = _noisy((215, 196, 180), 2.0, shape=(76, 320))
+    for u0 in (100, 190):  # tracks running away from the rover, each ~0.15 m wide near the camera
+        img[84:, u0:u0 + 18] = _noisy((178, 159, 143), 2.0, shape=(76, 18))  # royalejandro's median track colour
+    return img
+
+
+def test_floor_crossed_by_tyre_tracks_stays_floor_on_the_scored_map():
+    """Tracks fail the light-sand threshold, but the floor cells they cross still map as floor."""
+    rover = RoverState()
+    rover.img, rover.pos, rover.yaw, rover.pitch, rover.roll = _track_frame(), (100.0, 100.0), 0.0, 0.0, 0.0
+    for _ in range(5):
+        P.perception_step(rover)
+    mem = P.get_memory(rover)
+    assert mem.obs_votes[99:101, 101:105].sum() > 0  # the tracks do vote as not light sand
+    floor = rover.worldmap[99:101, 101:105]  # 1-5 m ahead, 1 m either side: the cells the tracks cross
+    assert (floor[:, :, 2] == 255).all()
 
 
 def _floor_ring(neighbours_on_floor):
