@@ -74,6 +74,8 @@ GOAL_PROGRESS_S = 12.0  # a goal whose path length did not shrink for this long 
 GOAL_PROGRESS_M = 1.0  # ...by at least this much, m
 FRONTIER_REACHED_M = 1.5  # a frontier target this close is reached (and ignored if still frontier), m
 OWN_CELLS_RADIUS = 1  # cells around the rover's own cell always treated as drivable, cells
+FRONTIER_COMMIT_S = 10.0  # a frontier target chosen this recently is kept while it is still frontier (no flip-flop while turning toward it), s
+SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
 EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
 BLOCKED_MEMORY_S = 600.0  # cells the rover got stuck on stay blocked this long (the hub near the start is crossed again and again), s
@@ -179,6 +181,7 @@ class NavMemory:
         self.search_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places the search has visited
         self.goal_best = math.inf
         self.goal_best_time = 0.0
+        self.goal_since = 0.0  # when the current path goal was chosen, s
         self.loops = explore.LoopDetector()
         self.visits = explore.VisitMap((grid.GRID_SIZE, grid.GRID_SIZE))
         self.seen_close = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # cells looked at from close
@@ -446,7 +449,22 @@ def _check_stuck(nav, s):
     for r, c in stuck.blocked_cells_ahead(s.pos, s.yaw):
         if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
             nav.blocked_at[r, c] = s.t
+    _give_up_search_goal_near(nav, s)
     return True
+
+
+def _give_up_search_goal_near(nav, s):
+    """A search or peek target beside the place the rover just got stuck is not worth another try:
+    the floor far from the trail near the start is a field of small rocks (seed 23 got stuck there
+    three times in 30 s going for one search target)."""
+    if nav.path_goal is None or nav.path_goal[0] not in ("peek", "search") or nav.path_goal[1] is None:
+        return
+    kind, goal = nav.path_goal
+    gx, gy = grid.cell_to_world(*goal)
+    if math.hypot(gx - s.pos[0], gy - s.pos[1]) <= SEARCH_STUCK_GIVE_UP_M:
+        radius = explore.PEEK_DONE_M if kind == "peek" else explore.SEARCH_MIN_AWAY_M
+        explore.ignore_disc(nav.search_done, goal, radius)
+        nav.path_goal = None
 
 
 def _check_turn_blocked(nav, s):
@@ -832,6 +850,7 @@ def _set_path(nav, s, kind, goal, cells):
                   s.t, len(cells))
         _reset_goal_progress(nav, s)
         nav.loops.reset()
+        nav.goal_since = s.t
     nav.path_goal = (kind, goal) if goal is not None else None
     nav.path_xy = astar.cells_to_world(cells)
     nav.path_idx = 0
@@ -878,7 +897,9 @@ def _plan_explore(rover, nav, s):
             break
     nav.frontier_count = len(targets)
     current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "frontier" else None
-    goal = explore.choose_target(targets, s.pos, s.yaw, current)
+    committed = current is not None and s.t - nav.goal_since < FRONTIER_COMMIT_S
+    goal = explore.choose_target(targets, s.pos, s.yaw, current,
+                                 math.inf if committed else explore.KEEP_TARGET_MARGIN_M)
     if goal is None:
         nav.no_frontier_plans += 1
         if dist is not None:  # dist is from the last cost grid: without the stuck memory when there is any

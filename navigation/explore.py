@@ -123,8 +123,13 @@ def score_targets(targets, pos, yaw_deg):
     return targets[:, 2] + HEADING_WEIGHT_M_PER_RAD * off - bonus
 
 
-def choose_target(targets, pos, yaw_deg, current=None):
-    """Best frontier cell (row, col), keeping `current` unless a clearly better one exists."""
+def choose_target(targets, pos, yaw_deg, current=None, keep_margin_m=KEEP_TARGET_MARGIN_M):
+    """Best frontier cell (row, col), keeping `current` unless one scores keep_margin_m better.
+
+    A caller that has just committed to `current` passes an infinite margin: the heading term
+    changes as the rover turns toward its path, and two targets on either side once took turns
+    at being best, leaving the rover turning in place for 20 s (seed 23).
+    """
     if len(targets) == 0:
         return None
     scores = score_targets(targets, pos, yaw_deg)
@@ -134,7 +139,7 @@ def choose_target(targets, pos, yaw_deg, current=None):
         near = d <= KEEP_TARGET_RADIUS_M
         if near.any():
             cur_score = scores[near].min()
-            if cur_score <= scores[best] + KEEP_TARGET_MARGIN_M:
+            if cur_score <= scores[best] + keep_margin_m:
                 k = np.nonzero(near)[0][int(np.argmin(scores[near]))]
                 return int(targets[k, 0]), int(targets[k, 1])
     return int(targets[best, 0]), int(targets[best, 1])

@@ -333,3 +333,15 @@ def test_a_rock_seen_beside_a_wrong_remembered_spot_is_chased():
     tx, ty = r.nav.rock_target
     assert math.hypot(tx - 97.0, ty - 76.8) > 1.5  # now heading for the rock in view
     assert r.nav.rock_seen_time == r.total_time
+
+
+def test_a_search_target_beside_a_stuck_spot_is_given_up():
+    """Seed 23: the far-floor search went for the same target in the rock field by the start three times."""
+    r = make_rover(pos=(92.0, 85.0))
+    s = decision._read_inputs(r)
+    r.nav.path_goal = ("search", (87, 94))  # 3 m away
+    decision._give_up_search_goal_near(r.nav, s)
+    assert r.nav.path_goal is None and r.nav.search_done[87, 94]
+    r.nav.path_goal = ("search", (87, 140))  # far away: the stuck was on the way, not at the target
+    decision._give_up_search_goal_near(r.nav, s)
+    assert r.nav.path_goal == ("search", (87, 140)) and not r.nav.search_done[87, 140]

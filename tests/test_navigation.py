@@ -306,3 +306,11 @@ def test_search_visits_the_nearer_of_a_pocket_peek_and_far_floor():
     assert explore.nearer_search_goal((190, 100), None, dist) == ("peek", (190, 100))
     assert explore.nearer_search_goal((50, 50), None, dist) is None  # unreachable
     assert explore.nearer_search_goal(None, None, dist) is None
+
+
+def test_a_just_chosen_frontier_is_kept_while_the_rover_turns_away_from_the_other():
+    """Seed 23: turning toward the path to one frontier made the other score best, and back, for 20 s."""
+    targets = np.array([[100.0, 150.0, 55.0, 3.0], [100.0, 50.0, 45.0, 3.0]])  # east 55 m, west 45 m by path
+    pos = (100.5, 100.5)
+    assert explore.choose_target(targets, pos, 180.0, current=(100, 150)) == (100, 50)  # facing west: west wins
+    assert explore.choose_target(targets, pos, 180.0, current=(100, 150), keep_margin_m=math.inf) == (100, 150)
