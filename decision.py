@@ -321,6 +321,9 @@ def _update_memory(rover, nav, s):
 
 
 def _register_collection(nav, s):
+    # a collection is progress: the turns that lined the rover up for it are no spin (seed 23's
+    # spin detector fired as the nook pickup ended and backed the rover into the rocks twice)
+    nav.spin_hist.clear()
     if nav.rock_target is not None:
         where = nav.rock_target
     elif s.pos is not None:

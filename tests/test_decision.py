@@ -345,3 +345,15 @@ def test_a_search_target_beside_a_stuck_spot_is_given_up():
     r.nav.path_goal = ("search", (87, 140))  # far away: the stuck was on the way, not at the target
     decision._give_up_search_goal_near(r.nav, s)
     assert r.nav.path_goal == ("search", (87, 140)) and not r.nav.search_done[87, 140]
+
+
+def test_turns_that_lined_up_a_collected_sample_are_no_spin():
+    r = make_rover()
+    nav = r.nav
+    for k in range(150):  # 15 s of turning in place before the pickup
+        nav.spin_hist.append((100.0 + 0.1 * k, True, 100.0, 85.0))
+    r.total_time, r.picking_up, nav.was_picking = 125.0, False, True  # the 10 s pickup just ended
+    s = decision._read_inputs(r)
+    decision._update_memory(r, nav, s)
+    decision._check_spinning(nav, s, "stop")
+    assert nav.recovery is None and len(nav.collected) == 1
