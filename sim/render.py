@@ -5,7 +5,9 @@ has cast_shadows off) is baked once into 0.1 m rasters (solid top, overhang gap,
 column-wise heightfield raymarch (numba): each image column is walked from the
 bottom row up, every ray resuming at the horizontal distance where the ray below
 hit (exact for a level camera, a few-pixel approximation under pitch/roll), with
-1 m max-height cells skipped in one jump. Sample rocks are small shaded ellipsoids
+1 m max-height cells skipped in one jump. Even columns are marched first; an odd column
+takes the average of its two neighbours wherever both hit the terrain at nearly one depth and
+colour (column coherence) and marches the rest. Sample rocks are small shaded ellipsoids
 drawn over it with a depth test.
 
 Poses outside the world are clamped into it; a camera inside rock sees that rock
@@ -40,6 +42,10 @@ FINE_STEP_PER_M = 0.012  # march step growth with distance, m per m
 REFINE_ITERS = 4  # bisection steps locating a rock surface between two march samples
 COARSE_CELL_M = 1.0  # empty-space-skipping cell size, m
 BLOCK_CELLS = 8  # coarse cells per side of the second skipping level (sky and far rays), count
+COLUMN_SHARE_MAX_M = 120.0  # an odd column averages its neighbours' terrain hits nearer than this (0: never), m
+COLUMN_SHARE_RATIO = 0.03  # ... when their depths differ by at most this fraction
+COLUMN_SHARE_LEVELS = 12  # ... and their colours by at most this in every channel, grey levels
+UNDER_OVERHANG = 4  # flag added to a pixel's hit kind when its ray passed under rock (such hits are not shared)
 DARK_LUT_STEP_M = 0.02  # distance resolution of the distance-darkening table, m
 DARK_LUT_MAX_M = 200.0  # the table's reach (farther hits use its last entry), m
 TEX_GROUND, TEX_COLOUR = 0, 1  # channels of the baked texel array (0.1 m height, 0xBBGGRR bits)
@@ -413,6 +419,15 @@ def _solid_at(terrain, inv_tcell, slab, inv_cell, x, y, z):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _colours_close(img, v, u0, u1, levels):
+    """True when pixels (v, u0) and (v, u1) differ by at most `levels` in every channel."""
+    for ch in range(3):
+        if abs(np.int32(img[v, u0, ch]) - np.int32(img[v, u1, ch])) > levels:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _spread(c):
     """Packed 0xBBGGRR uint32 -> int64 with each channel in its own LANE_BITS-bit lane."""
     c = np.int64(c)
@@ -423,7 +438,8 @@ def _spread(c):
 def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u, slab, rock64, coarse,
                    bmax, block_m, cell, coarse_m, origin,
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
-                   underside_shade, world_size, dark_lut, dark_lut_step):
+                   underside_shade, world_size, dark_lut, dark_lut_step, share_depth_m, share_ratio,
+                   share_levels):
     """Column-wise raymarch into row-major (H, W, 3) image and (H, W) depth (module docstring).
 
     Free space is skipped per block_m block (above everything in it) and per coarse_m cell
@@ -447,7 +463,13 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
     rounding = half | (half << LANE_BITS) | (half << (2 * LANE_BITS))
     wscale = float(1 << WEIGHT_BITS)
     table = np.empty((8, h_img))
-    for u in range(w_img):
+    # per pixel: 1 terrain, 3 rock, 0 sky or far; + UNDER_OVERHANG when the ray passed under rock
+    hit_kind = np.zeros((h_img, w_img), np.uint8)
+    n_even = (w_img + 1) // 2
+    for i_col in range(w_img):
+        # even columns first, then odd ones, which may share their two neighbours' terrain hits
+        u = 2 * i_col if i_col < n_even else 2 * (i_col - n_even) + 1
+        shared = u % 2 == 1 and u + 1 < w_img and share_depth_m > 0.0
         _ray_column(rot, ray_a[u], ray_b, table)
         prev_s = 0.0  # where the ray below ended (hit, sky or far), horizontal m
         sky_rest = False
@@ -469,6 +491,23 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                     img[v, u, ch] = sky_rgb[ch]
                 depth[v, u] = np.inf
                 continue
+            if shared and g_first < 0.0 and hit_kind[v, u - 1] == 1 and hit_kind[v, u + 1] == 1:
+                # column coherence: both neighbours hit the open terrain at nearly one depth and
+                # colour: this pixel is their average (measured: 99.8 % of pixels within 8 levels
+                # of marching it, ~17 % less time per frame)
+                d_l = depth[v, u - 1]
+                d_r = depth[v, u + 1]
+                if (d_l < share_depth_m and d_r < share_depth_m and abs(d_l - d_r) <= share_ratio * min(d_l, d_r)
+                        and _colours_close(img, v, u - 1, u + 1, share_levels)):
+                    for ch in range(3):
+                        img[v, u, ch] = (np.uint16(img[v, u - 1, ch]) + np.uint16(img[v, u + 1, ch]) + 1) >> 1
+                    d_mid = 0.5 * (d_l + d_r)
+                    depth[v, u] = d_mid
+                    hit_kind[v, u] = 1
+                    # the ray above restarts short of both neighbours' hits: the average may lie past a
+                    # ridge this column's ray would have met first
+                    prev_s = (1.0 - share_ratio) * min(d_l, d_r) / table[3, v]
+                    continue
             hx = table[0, v]
             hy = table[1, v]
             k = table[2, v]
@@ -673,6 +712,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                 img[v, u, 1] = (acc >> (WEIGHT_BITS + LANE_BITS)) & lane_mask
                 img[v, u, 2] = (acc >> (WEIGHT_BITS + 2 * LANE_BITS)) & lane_mask
                 depth[v, u] = s * table[3, v]
+                hit_kind[v, u] = state if g_first < 0.0 else state + UNDER_OVERHANG
                 prev_s = s
             elif hit == 2:
                 for ch in range(3):
@@ -745,6 +785,7 @@ class Renderer:
         self.sky_rgb = np.array(SKY_RGB, np.uint8)
         self.far_rgb = np.array(FAR_RGB, np.uint8)
         self._dark_lut = _darkening_lut()
+        self.column_share_m = COLUMN_SHARE_MAX_M  # 0: every column marched (the reference image)
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
         self._last_camera = None
         self._terrain = np.ascontiguousarray(world.terrain_height, dtype=np.float32)
@@ -784,7 +825,8 @@ class Renderer:
                        BLOCK_CELLS * COARSE_CELL_M, float(self.world.rock_cell_m), COARSE_CELL_M,
                        origin, FAR_M, FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self.zmax,
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
-                       self._dark_lut, DARK_LUT_STEP_M)
+                       self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
+                       COLUMN_SHARE_LEVELS)
         if tracks is not None:
             self.draw_tracks(img, depth, origin, rot, tracks)
         self.draw_samples(img, depth, origin, rot, samples)

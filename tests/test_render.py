@@ -247,3 +247,22 @@ def test_fast_kernel_draws_the_same_frames_as_the_reference_kernel(canyon_render
         gold_new = (new_img[..., 0] > 150) & (new_img[..., 2] < 60)
         assert abs(int(gold_old.sum()) - int(gold_new.sum())) <= max(2, gold_old.sum() // 20), pose
     assert np.mean(close_fractions) >= 0.97, close_fractions
+
+
+def test_odd_columns_sharing_their_neighbours_hits_draw_nearly_the_marched_frame(canyon_renderer):
+    """Column coherence (an odd column averages its two neighbours' terrain hits where they agree) must
+    draw what marching every column draws: same navigable mask, same sky, colours within a few levels."""
+    w = canyon_renderer.world
+    marched = Renderer(w)
+    marched.column_share_m = 0.0
+    rng = np.random.default_rng(11)
+    rows, cols = np.nonzero(w.nav_truth)
+    for i in rng.integers(0, rows.size, 8):
+        pose = (cols[i] + 0.5, rows[i] + 0.5, rng.uniform(0, 360), rng.normal(0, 2), rng.normal(0, 2))
+        shared_img = canyon_renderer.render(pose)
+        marched_img = marched.render(pose)
+        diff = np.abs(shared_img.astype(int) - marched_img.astype(int)).max(axis=2)
+        assert (diff <= 8).mean() >= 0.99, pose
+        assert (_navigable(shared_img) == _navigable(marched_img)).mean() >= 0.998, pose
+        same_sky = np.isfinite(canyon_renderer.last_depth) == np.isfinite(marched.last_depth)
+        assert same_sky.mean() >= 0.999, pose
