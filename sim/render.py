@@ -5,9 +5,9 @@ has cast_shadows off) is baked once into 0.1 m rasters (solid top, overhang gap,
 column-wise heightfield raymarch (numba): each image column is walked from the
 bottom row up, every ray resuming at the horizontal distance where the ray below
 hit (exact for a level camera, a few-pixel approximation under pitch/roll), with
-1 m max-height cells skipped in one jump. Even columns are marched first; an odd column
-takes the average of its two neighbours wherever both hit the terrain at nearly one depth and
-colour (column coherence) and marches the rest. Sample rocks are small shaded ellipsoids
+1 m max-height cells skipped in one jump. Every 4th column is marched first; the columns between
+take the average of their two neighbours (2 apart, then 1) wherever both hit open terrain at nearly
+one depth and colour (column coherence), and march the rest. Sample rocks are small shaded ellipsoids
 drawn over it with a depth test.
 
 Poses outside the world are clamped into it; a camera inside rock sees that rock
@@ -42,9 +42,10 @@ FINE_STEP_PER_M = 0.012  # march step growth with distance, m per m
 REFINE_ITERS = 4  # bisection steps locating a rock surface between two march samples
 COARSE_CELL_M = 1.0  # empty-space-skipping cell size, m
 BLOCK_CELLS = 8  # coarse cells per side of the second skipping level (sky and far rays), count
-COLUMN_SHARE_MAX_M = 120.0  # an odd column averages its neighbours' terrain hits nearer than this (0: never), m
+COLUMN_SHARE_MAX_M = 120.0  # a column may average its neighbours' terrain hits nearer than this (0: never), m
 COLUMN_SHARE_RATIO = 0.03  # ... when their depths differ by at most this fraction
 COLUMN_SHARE_LEVELS = 12  # ... and their colours by at most this in every channel, grey levels
+COLUMN_SHARE_TIERS = 2  # 1: odd columns may share; 2: so may columns 2 mod 4 (every 4th is marched), count
 UNDER_OVERHANG = 4  # flag added to a pixel's hit kind when its ray passed under rock (such hits are not shared)
 DARK_LUT_STEP_M = 0.02  # distance resolution of the distance-darkening table, m
 DARK_LUT_MAX_M = 200.0  # the table's reach (farther hits use its last entry), m
@@ -439,7 +440,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                    bmax, block_m, cell, coarse_m, origin,
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, world_size, dark_lut, dark_lut_step, share_depth_m, share_ratio,
-                   share_levels):
+                   share_levels, col_order, col_offset):
     """Column-wise raymarch into row-major (H, W, 3) image and (H, W) depth (module docstring).
 
     Free space is skipped per block_m block (above everything in it) and per coarse_m cell
@@ -465,11 +466,11 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
     table = np.empty((8, h_img))
     # per pixel: 1 terrain, 3 rock, 0 sky or far; + UNDER_OVERHANG when the ray passed under rock
     hit_kind = np.zeros((h_img, w_img), np.uint8)
-    n_even = (w_img + 1) // 2
     for i_col in range(w_img):
-        # even columns first, then odd ones, which may share their two neighbours' terrain hits
-        u = 2 * i_col if i_col < n_even else 2 * (i_col - n_even) + 1
-        shared = u % 2 == 1 and u + 1 < w_img and share_depth_m > 0.0
+        # marched columns first, then the ones that may share their two neighbours' terrain hits
+        u = col_order[i_col]
+        off = col_offset[u]
+        shared = off > 0 and share_depth_m > 0.0
         _ray_column(rot, ray_a[u], ray_b, table)
         prev_s = 0.0  # where the ray below ended (hit, sky or far), horizontal m
         sky_rest = False
@@ -491,16 +492,16 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                     img[v, u, ch] = sky_rgb[ch]
                 depth[v, u] = np.inf
                 continue
-            if shared and g_first < 0.0 and hit_kind[v, u - 1] == 1 and hit_kind[v, u + 1] == 1:
+            if shared and g_first < 0.0 and hit_kind[v, u - off] == 1 and hit_kind[v, u + off] == 1:
                 # column coherence: both neighbours hit the open terrain at nearly one depth and
                 # colour: this pixel is their average (measured: 99.8 % of pixels within 8 levels
                 # of marching it, ~17 % less time per frame)
-                d_l = depth[v, u - 1]
-                d_r = depth[v, u + 1]
+                d_l = depth[v, u - off]
+                d_r = depth[v, u + off]
                 if (d_l < share_depth_m and d_r < share_depth_m and abs(d_l - d_r) <= share_ratio * min(d_l, d_r)
-                        and _colours_close(img, v, u - 1, u + 1, share_levels)):
+                        and _colours_close(img, v, u - off, u + off, share_levels)):
                     for ch in range(3):
-                        img[v, u, ch] = (np.uint16(img[v, u - 1, ch]) + np.uint16(img[v, u + 1, ch]) + 1) >> 1
+                        img[v, u, ch] = (np.uint16(img[v, u - off, ch]) + np.uint16(img[v, u + off, ch]) + 1) >> 1
                     d_mid = 0.5 * (d_l + d_r)
                     depth[v, u] = d_mid
                     hit_kind[v, u] = 1
@@ -740,6 +741,25 @@ def _kernel_rasters(ground, slab_lo, slab_hi, colour_ground) -> dict:
     return {"tex": tex, "tex_u": tex_u, "slab": slab}
 
 
+def column_plan(width: int, tiers: int):
+    """Order in which the kernel draws the image columns, and per column the distance of the two
+    neighbours it may average (0: marched). tiers 1: even columns marched, odd ones between them;
+    tiers 2: every 4th column marched, then the ones two apart, then the odd ones."""
+    stride = 1 << tiers
+    offset = np.zeros(width, np.int64)
+    order = [u for u in range(0, width, stride)]
+    for level in range(tiers - 1, -1, -1):
+        off = 1 << level
+        for u in range(off, width, 2 * off):
+            if u + off < width:
+                offset[u] = off
+            order.append(u)
+    assert sorted(order) == list(range(width))
+    # a column without both neighbours is marched: move it ahead of every column that may read it
+    marched = [u for u in order if offset[u] == 0]
+    return np.array(marched + [u for u in order if offset[u] > 0], np.int64), offset
+
+
 def pack_rgb(rgb: np.ndarray) -> np.ndarray:
     """uint8 (..., 3) -> int64 with each channel in its own LANE_BITS-bit lane (for the kernel's blend)."""
     c = rgb.astype(np.int64)
@@ -786,6 +806,7 @@ class Renderer:
         self.far_rgb = np.array(FAR_RGB, np.uint8)
         self._dark_lut = _darkening_lut()
         self.column_share_m = COLUMN_SHARE_MAX_M  # 0: every column marched (the reference image)
+        self._col_order, self._col_offset = column_plan(IMAGE_W, COLUMN_SHARE_TIERS)
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
         self._last_camera = None
         self._terrain = np.ascontiguousarray(world.terrain_height, dtype=np.float32)
@@ -826,7 +847,7 @@ class Renderer:
                        origin, FAR_M, FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self.zmax,
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
-                       COLUMN_SHARE_LEVELS)
+                       COLUMN_SHARE_LEVELS, self._col_order, self._col_offset)
         if tracks is not None:
             self.draw_tracks(img, depth, origin, rot, tracks)
         self.draw_samples(img, depth, origin, rot, samples)

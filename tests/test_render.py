@@ -266,3 +266,17 @@ def test_odd_columns_sharing_their_neighbours_hits_draw_nearly_the_marched_frame
         assert (_navigable(shared_img) == _navigable(marched_img)).mean() >= 0.998, pose
         same_sky = np.isfinite(canyon_renderer.last_depth) == np.isfinite(marched.last_depth)
         assert same_sky.mean() >= 0.999, pose
+
+
+@pytest.mark.parametrize("tiers", [1, 2])
+def test_column_plan_draws_every_column_once_after_the_neighbours_it_averages(tiers):
+    from sim.render import column_plan
+
+    order, offset = column_plan(IMAGE_W, tiers)
+    assert sorted(order.tolist()) == list(range(IMAGE_W))
+    done = set()
+    for u in order.tolist():
+        if offset[u]:
+            assert {u - offset[u], u + offset[u]} <= done, u
+        done.add(u)
+    assert (offset == 0).sum() <= IMAGE_W // 2 ** tiers + 2  # only the last columns lack a right neighbour
