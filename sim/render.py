@@ -211,18 +211,16 @@ def bake_rasters(world: World):
         lam = np.clip((-gx * sun[0] - gy * sun[1] + sun[2]) / np.sqrt(gx * gx + gy * gy + 1.0), 0.0, 1.0)
         return (1.0 - SLOPE_SHADE) + SLOPE_SHADE * lam / math.sin(el)
 
-    if world.cast_shadows:
-        k = SHADOW_GRID_STRIDE
-        # only the terrain casts shadows: the real frames show sunlit floor under and beside the rocks
-        coarse_ground = np.ascontiguousarray(ground[::k, ::k])
-        shadow_c = np.zeros(coarse_ground.shape, np.uint8)
-        _shadow_kernel(coarse_ground, cell * k, math.cos(az), math.sin(az), math.tan(el),
-                       float(ground.max()), SHADOW_STEP_M, shadow_c)
-        shadow = cv2.resize(shadow_c.astype(np.float32), (n, n), interpolation=cv2.INTER_LINEAR)
-        shadow = cv2.GaussianBlur(shadow, (0, 0), SHADOW_BLUR_M / cell)
-        shadow = np.where(has_gap, 0.0, shadow)  # the floor under the overhang looks sunlit in the real frames
-    else:  # the simulator's Fastest/Fast quality levels render no shadows
-        shadow = np.zeros((n, n), np.float32)
+    # both quality levels darken the floor the terrain hides from the sun, by different factors;
+    # only the terrain casts shadows: the real frames show sunlit floor under and beside the rocks
+    k = SHADOW_GRID_STRIDE
+    coarse_ground = np.ascontiguousarray(ground[::k, ::k])
+    shadow_c = np.zeros(coarse_ground.shape, np.uint8)
+    _shadow_kernel(coarse_ground, cell * k, math.cos(az), math.sin(az), math.tan(el),
+                   float(ground.max()), SHADOW_STEP_M, shadow_c)
+    shadow = cv2.resize(shadow_c.astype(np.float32), (n, n), interpolation=cv2.INTER_LINEAR)
+    shadow = cv2.GaussianBlur(shadow, (0, 0), SHADOW_BLUR_M / cell)
+    shadow = np.where(has_gap, 0.0, shadow)  # the floor under the overhang looks sunlit in the real frames
     lut_rgb = np.array(SAND_LUT_RGB, np.float32)
     ground_rgb = np.stack([np.interp(sand, SAND_LUT_WEIGHT, lut_rgb[:, ch]) for ch in range(3)], -1)
     rng = np.random.default_rng(12345)  # fixed: the texture is part of the look, not random per run
@@ -230,7 +228,7 @@ def bake_rasters(world: World):
                            interpolation=cv2.INTER_CUBIC) for cells in TEXTURE_CELLS) / len(TEXTURE_CELLS)
     rough = 1.0 + TEXTURE_AMPLITUDE * noise * np.clip((0.7 - sand) / 0.4, 0.0, 1.0)
     # terrain colour everywhere (what a ray hitting the ground sees), bilinear in the kernel
-    light = sun_shade(ground) * (1.0 - (1.0 - SHADOW_FACTOR) * shadow)
+    light = sun_shade(ground) * (1.0 - (1.0 - _shadow_factor(world)) * shadow)
     colour_ground = np.clip(ground_rgb * (rough * light)[..., None], 0, 255).astype(np.uint8)
     # rock colour (what a ray hitting a rock slab sees), nearest cell in the kernel
     rock_rgb = np.array(ROCK_RGB, np.float32) * (1.0 + TEXTURE_AMPLITUDE * noise)[..., None]
@@ -257,6 +255,16 @@ def bake_rasters(world: World):
             "cground": cground, "cbottom": cbottom,
             "sand": sand.astype(np.float32), "shadow": shadow.astype(np.float32),
             "has_rock": has_rock, "light": light.astype(np.float32), "sun": sun}
+
+
+def _shadow_factor(world: World) -> float:
+    """Brightness of the floor the terrain hides from the sun: cast shadows (test_dataset's quality
+    level), or the weaker darkening the drives without cast shadows show (sim/shading.py)."""
+    if world.cast_shadows:
+        return SHADOW_FACTOR
+    from sim.shading import SHADOWLESS_SHADOW_FACTOR
+
+    return SHADOWLESS_SHADOW_FACTOR
 
 
 def _coarse_max(top: np.ndarray, k: int) -> np.ndarray:
@@ -294,10 +302,23 @@ def _block_max(cmax: np.ndarray, cells: int) -> np.ndarray:
     return pad.reshape(nb, cells, nb, cells).max(axis=(1, 3))
 
 
-def _darkening_lut() -> np.ndarray:
-    """Brightness factor by viewing distance (one entry per DARK_LUT_STEP_M): the far floor darkens."""
+def _darkening_lut(cast_shadows: bool = True) -> np.ndarray:
+    """Brightness factor by viewing distance (one entry per DARK_LUT_STEP_M): the far floor darkens,
+    more strongly at the simulator's quality levels without cast shadows (sim/shading.py)."""
     dist = np.arange(int(DARK_LUT_MAX_M / DARK_LUT_STEP_M) + 1) * DARK_LUT_STEP_M
+    if not cast_shadows:
+        from sim.shading import shadowless_darkening
+
+        return shadowless_darkening(dist)
     return (1.0 - DIST_DARKEN * (1.0 - np.exp(-dist / DIST_SCALE_M))).astype(np.float64)
+
+
+def _far_tint(ray_a, ray_b):
+    """(tint table, per-pixel |ray| for a unit forward component) for the shadowless far-floor colour."""
+    from sim.shading import far_tint_lut
+
+    aa, bb = np.meshgrid(ray_a, ray_b)
+    return far_tint_lut(), np.sqrt(1.0 + aa * aa + bb * bb).astype(np.float64)
 
 
 # ---------------------------------------------------------------------- marching
@@ -804,7 +825,8 @@ class Renderer:
         self.ray_b = ((CY - (np.arange(IMAGE_H) + 0.5)) / FOCAL_PX).astype(np.float64)
         self.sky_rgb = np.array(SKY_RGB, np.uint8)
         self.far_rgb = np.array(FAR_RGB, np.uint8)
-        self._dark_lut = _darkening_lut()
+        self._dark_lut = _darkening_lut(bool(world.cast_shadows))
+        self._far_tint = None if world.cast_shadows else _far_tint(self.ray_a, self.ray_b)  # (lut, ray norms)
         self.column_share_m = COLUMN_SHARE_MAX_M  # 0: every column marched (the reference image)
         self._col_order, self._col_offset = column_plan(IMAGE_W, COLUMN_SHARE_TIERS)
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
@@ -848,6 +870,10 @@ class Renderer:
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
                        COLUMN_SHARE_LEVELS, self._col_order, self._col_offset)
+        if self._far_tint is not None:
+            from sim.shading import DARK_TINT_STEP_M, apply_far_tint
+
+            apply_far_tint(img, depth, self._far_tint[1], self._far_tint[0], DARK_TINT_STEP_M)
         if tracks is not None:
             self.draw_tracks(img, depth, origin, rot, tracks)
         self.draw_samples(img, depth, origin, rot, samples)
