@@ -52,6 +52,7 @@ TURN_IN_PLACE_SPEED_MPS = 0.3  # the simulator turns in place only below 0.316 m
 
 # --- heading / turning ----------------------------------------------------------------
 ROTATE_ENTER_DEG = 90.0  # a wanted heading further off than this is reached by turning in place, degrees
+LEAVE_PICKUP_ROTATE_DEG = 30.0  # leaving a pickup spot (samples lie at wall feet), turn in place first when the way on is further off than this, degrees
 ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
 SPIN_WINDOW_S = 20.0  # window for detecting endless turning in place, s
 SPIN_STOP_FRACTION = 0.6  # ...share of it spent turning in place
@@ -104,6 +105,7 @@ PICKUP_RETRY_S = 2.0  # re-request a pickup if picking_up did not start within t
 PICKUP_REACH_M = 0.84  # pickup point ahead of the rover origin, m
 STAGE_DECIDE_M = 7.0  # a rock this close gets its approach decided: straight in, or via a staging point, m
 STAGE_REACHED_M = 0.6  # the staging point counts as reached this close, m
+STAGE_BEHIND_REACHED_M = 1.2  # ...or this close when it lies behind the rover (no 180 deg turn to face a point a metre off; seed 23), m
 STAGE_FACE_DEG = 15.0  # at the staging point, turn in place when the rock is further off than this (above ROTATE_EXIT_DEG, so a finished turn never restarts), degrees
 COLLECT_DEBOUNCE_S = 3.0  # pickup-finished and count-dropped within this time are one collection, s
 
@@ -200,6 +202,7 @@ class NavMemory:
         self.pickup_sent_at = -math.inf
         self.was_picking = False
         self.last_collect_t = -math.inf  # when the last collection was registered, s
+        self.leaving_pickup = False  # the rover has not driven off since its last collection
         self.last_remaining = None
         self.done = False
 
@@ -304,6 +307,8 @@ def _update_memory(rover, nav, s):
         if nav.home is None and s.pos is not None:
             nav.home = s.pos
     nav.lead.update(s.t, s.yaw)
+    if abs(s.vel) > 1.0:
+        nav.leaving_pickup = False  # driving off already (e.g. by camera toward the next rock)
     if s.pos is not None:
         nav.visits.update(s.t, grid.world_to_cell(s.pos))
         nav.loops.update(s.t, s.pos, s.yaw)
@@ -324,6 +329,7 @@ def _register_collection(nav, s):
     # a collection is progress: the turns that lined the rover up for it are no spin (seed 23's
     # spin detector fired as the nook pickup ended and backed the rover into the rocks twice)
     nav.spin_hist.clear()
+    nav.leaving_pickup = True
     if nav.rock_target is not None:
         where = nav.rock_target
     elif s.pos is not None:
@@ -676,7 +682,8 @@ def _stage_approach(rover, nav, s, dist):
         return None
     sx, sy, _heading = nav.stage
     d_stage = math.hypot(sx - s.pos[0], sy - s.pos[1])
-    if d_stage > STAGE_REACHED_M:
+    behind = abs(math.degrees(pursuit.bearing(s.pos, s.yaw, (sx, sy)))) > ROTATE_ENTER_DEG
+    if d_stage > (STAGE_BEHIND_REACHED_M if behind else STAGE_REACHED_M):
         goal = grid.world_to_cell((sx, sy))
         if d_stage > PATH_END_SLOW_M / 2:
             if nav.path_goal != ("stage", goal) or _needs_replan(nav, s):
@@ -754,6 +761,13 @@ def _drive_heading(nav, s, alpha, max_speed, planned=False):
     if abs(math.degrees(alpha)) > ROTATE_ENTER_DEG:
         _start_rotation(nav, s, s.yaw + math.degrees(alpha), "path-behind")
         return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+    if nav.leaving_pickup:
+        # a sample lies at a wall foot: arcing off at full lock from a standstill climbs the wall
+        # (seeds 3 and 23 got stuck twice each leaving (70.3, 88.0)), so face the way on first
+        if abs(math.degrees(alpha)) > LEAVE_PICKUP_ROTATE_DEG and abs(s.vel) < TURN_IN_PLACE_SPEED_MPS:
+            _start_rotation(nav, s, s.yaw + math.degrees(alpha), "leave-pickup")
+            return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+        nav.leaving_pickup = False
     reach = reactive.reach_profile(s.nav_angles, s.nav_dists, s.obs_angles, s.obs_dists)
     heading, clear = reactive.choose_heading(reach, alpha)
     if clear < REACH_STOP_M and planned:

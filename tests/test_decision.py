@@ -357,3 +357,19 @@ def test_turns_that_lined_up_a_collected_sample_are_no_spin():
     decision._update_memory(r, nav, s)
     decision._check_spinning(nav, s, "stop")
     assert nav.recovery is None and len(nav.collected) == 1
+
+
+@pytest.mark.parametrize("leaving_pickup", [True, False])
+def test_leaving_a_pickup_spot_turns_to_the_way_on_before_driving(leaving_pickup):
+    """Seeds 3 and 23: after the pickup at a wall foot the rover arced off at full lock and climbed the wall."""
+    r = make_rover()
+    s = decision._read_inputs(r)
+    r.nav.leaving_pickup = leaving_pickup
+    cmd = decision._drive_heading(r.nav, s, math.radians(55.0), 3.0, planned=True)
+    if leaving_pickup:
+        assert cmd.throttle == 0.0 and r.nav.rotate_heading is not None  # turning in place first
+    else:
+        assert cmd.throttle > 0.0 and r.nav.rotate_heading is None  # arcing off as before
+    cmd = decision._drive_heading(r.nav, s, math.radians(5.0), 3.0, planned=True)
+    r.nav.rotate_heading = None
+    assert not r.nav.leaving_pickup  # facing the way on: the next turns are ordinary driving

@@ -253,3 +253,18 @@ def test_a_stuck_during_a_rock_approach_makes_it_decided_again():
     s = decision._read_inputs(r)
     decision._begin_recovery(r.nav, s, "stuck", 3.0)
     assert r.nav.stage_for is None
+
+
+def test_a_staging_point_just_behind_the_rover_counts_as_reached():
+    """Seed 23: 0.7 m past its staging point, the rover turned 180 deg to face it, then back to the rock."""
+    free, sample = _nook()
+    r = _rover_with_abandoned_arm()
+    r.worldmap[:] = 0
+    r.worldmap[free, 2] = 255
+    r.pos, r.yaw = (122.0, 90.5), 0.0  # facing the rock, 1 m past the staging point
+    nav = r.nav
+    nav.rock_target = nav.stage_for = sample
+    nav.stage, nav.stage_done = (121.0, 90.5, 0.0), False
+    s = decision._read_inputs(r)
+    assert decision._stage_approach(r, nav, s, math.hypot(sample[0] - 122.0, 0.0)) is None
+    assert nav.stage_done and nav.rotate_heading is None
