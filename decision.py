@@ -76,6 +76,8 @@ GOAL_PROGRESS_M = 1.0  # ...by at least this much, m
 FRONTIER_REACHED_M = 1.5  # a frontier target this close is reached (and ignored if still frontier), m
 OWN_CELLS_RADIUS = 1  # cells around the rover's own cell always treated as drivable, cells
 FRONTIER_COMMIT_S = 10.0  # a frontier target chosen this recently is kept while it is still frontier (no flip-flop while turning toward it), s
+SEARCH_FACES_PER_GOAL = 2  # turns to face unsearched wall feet at one reached search goal, at most
+SEARCH_GOAL_KINDS = ("peek", "search", "look")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet
 SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
 EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
@@ -181,6 +183,8 @@ class NavMemory:
         self.second_sweep_done = False
         self.search_left = True  # sample search still has places to visit
         self.search_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places the search has visited
+        self.search_faced_goal = None  # the search goal the rover last turned at to face unsearched wall feet
+        self.search_faces = 0  # ...and how many turns it made there
         self.goal_best = math.inf
         self.goal_best_time = 0.0
         self.goal_since = 0.0  # when the current path goal was chosen, s
@@ -466,12 +470,12 @@ def _give_up_search_goal_near(nav, s):
     """A search or peek target beside the place the rover just got stuck is not worth another try:
     the floor far from the trail near the start is a field of small rocks (seed 23 got stuck there
     three times in 30 s going for one search target)."""
-    if nav.path_goal is None or nav.path_goal[0] not in ("peek", "search") or nav.path_goal[1] is None:
+    if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or nav.path_goal[1] is None:
         return
     kind, goal = nav.path_goal
     gx, gy = grid.cell_to_world(*goal)
     if math.hypot(gx - s.pos[0], gy - s.pos[1]) <= SEARCH_STUCK_GIVE_UP_M:
-        radius = explore.PEEK_DONE_M if kind == "peek" else explore.SEARCH_MIN_AWAY_M
+        radius = _search_done_radius(kind)
         explore.ignore_disc(nav.search_done, goal, radius)
         nav.path_goal = None
 
@@ -599,17 +603,44 @@ def mode_forward(rover, nav, s):
 def mode_search(rover, nav, s):
     """Map complete, samples missing: peek into shadowed pockets and visit mapped floor far from
     the trail, nearest first; None when nothing is left."""
-    if nav.path_goal is None or nav.path_goal[0] not in ("peek", "search") or _needs_replan(nav, s):
+    if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or _needs_replan(nav, s):
         _plan_search(rover, nav, s)
     if not nav.search_left or nav.path_goal is None or len(nav.path_xy) < 2:
         return None
     kind, goal = nav.path_goal
     goal_xy = grid.cell_to_world(*goal)
     if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M or _goal_stalled(nav, s):
-        radius = explore.PEEK_DONE_M if kind == "peek" else explore.SEARCH_MIN_AWAY_M
+        if _face_unsearched(rover, nav, s, goal):
+            return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+        radius = _search_done_radius(kind)
         explore.ignore_disc(nav.search_done, goal, radius)
         nav.plan_time = -math.inf
     return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
+
+
+def _search_done_radius(kind):
+    """How far around a reached (or given-up) search goal counts as searched, m: a peek rules out the
+    shadow beside it, a far-floor visit the floor around it, a look the wall feet it turned to face."""
+    return {"peek": explore.PEEK_DONE_M, "look": explore.SEARCH_FACE_RADIUS_M}.get(kind, explore.SEARCH_MIN_AWAY_M)
+
+
+def _face_unsearched(rover, nav, s, goal):
+    """At a reached search goal, turn to face nearby wall feet the camera never saw from close by
+    (see explore.face_heading) before calling the place searched; True when a turn was started.
+    At most SEARCH_FACES_PER_GOAL turns per goal, so a cell the camera cannot see never holds it."""
+    if nav.search_faced_goal != goal:
+        nav.search_faced_goal, nav.search_faces = goal, 0
+    if nav.search_faces >= SEARCH_FACES_PER_GOAL:
+        return False
+    free, obstacle, _unknown = _grids(rover)
+    looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
+    heading = explore.face_heading(explore.unsearched_wall_feet(free, obstacle, looked), s.pos, s.yaw)
+    if heading is None:
+        return False
+    nav.search_faces += 1
+    log.info("sample search: facing %.0f deg at (%.1f, %.1f), t=%.1f", heading, s.pos[0], s.pos[1], s.t)
+    _start_rotation(nav, s, heading, "search-face")
+    return True
 
 
 def mode_sample(rover, nav, s):
@@ -938,9 +969,13 @@ def _plan_search(rover, nav, s):
     cell = grid.world_to_cell(s.pos)
     _open_around_rover(cost, cell)
     dist, parent = astar.distance_field(cost, cell)
+    looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
+    unsearched = explore.unsearched_wall_feet(free, obstacle, looked)
     chosen = explore.nearer_search_goal(_peek_goal(rover, nav, s, free, dist),
                                         explore.search_target(free, nav.visits.visited(), nav.search_done, dist),
-                                        dist)
+                                        dist,
+                                        explore.nearest_target(explore.look_targets(unsearched, free,
+                                                                                    nav.search_done, dist)))
     kind, goal = chosen if chosen is not None else ("search", None)
     if goal is None:
         nav.search_left = False

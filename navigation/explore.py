@@ -31,6 +31,12 @@ PEEK_MIN_CELLS = 3  # shadowed-floor clusters smaller than this are not worth a 
 PEEK_MIN_DEPTH_M = 2.0  # ...nor those not reaching this far from sunlit floor (a shadowed fringe along a wall), m
 PEEK_MAX_DEPTH_M = 3.5  # the rover peeks no deeper into shadow than this (dark slots are traps; 3 m more are seen), m
 PEEK_DONE_M = 1.5  # a reached peek target rules out the shadowed floor this close to it, m
+SEARCH_LOOK_M = 3.0  # a wall foot counts as searched once the camera saw it from this close (its footprint is its field of view), m
+SEARCH_LOOK_MIN_CELLS = 3  # smaller clusters of unsearched wall feet are not worth a visit (a sample nook is wider), cells
+SEARCH_FACE_RADIUS_M = 5.0  # at a reached search / peek target the rover turns to face unsearched wall feet this close, m
+SEARCH_FACE_HALF_FOV_DEG = 30.0  # ...counting those within this half-angle of a heading (inside the camera's ~55 deg), degrees
+SEARCH_FACE_STEP_DEG = 10.0  # candidate headings are tried at this spacing, degrees
+SEARCH_FACE_MIN_CELLS = 2  # fewer unsearched wall-foot cells than this in view are not worth a turn, cells
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
@@ -195,15 +201,91 @@ def search_target(free, visited, done, dist):
     return divmod(k, free.shape[1])
 
 
-def nearer_search_goal(peek, far, dist):
-    """("peek" | "search", cell) for whichever of the best pocket peek and the best far-floor cell
-    is nearer by path, or None when neither exists.
+def unsearched_wall_feet(free, obstacle, looked):
+    """bool map: obstacle cells touching mapped floor that the camera never saw from close by.
+
+    Samples lie at wall feet, and one in a nook (a pocket of floor mapped as wall from afar) only
+    shows once the camera faces it from a few metres.  Passing by with the nook beside or
+    behind the camera does not count: `looked` (perception's closest-look map) only holds cells
+    that were inside the camera's ground footprint, i.e. within its field of view.
+    """
+    floor_near = cv2.dilate(free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    return obstacle & floor_near & ~looked
+
+
+def look_targets(unsearched, free, done, dist):
+    """Clusters of unsearched wall feet (minus `done` cells), each with the floor cell beside it that is
+    nearest by path: one (row, col, path_cost, size) per cluster, like frontier_targets.
+
+    The far-floor search visits floor away from the trail and so never went near a nook beside it
+    (seeds 10 and 23: the east-nook sample lay 4-5 m from the trail, never in the camera's view).
+    """
+    mask = unsearched & ~done
+    mask[0, :] = mask[-1, :] = mask[:, 0] = mask[:, -1] = False
+    if not mask.any():
+        return np.zeros((0, 4))
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    beside = cv2.dilate(labels.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int64)
+    stand = free & (beside > 0) & np.isfinite(dist)
+    rows, cols = np.nonzero(stand)
+    if rows.size == 0:
+        return np.zeros((0, 4))
+    lab, d = beside[rows, cols], dist[rows, cols]
+    ok = stats[lab, cv2.CC_STAT_AREA] >= SEARCH_LOOK_MIN_CELLS
+    if not ok.any():
+        return np.zeros((0, 4))
+    rows, cols, lab, d = rows[ok], cols[ok], lab[ok], d[ok]
+    return _first_per_cluster(rows, cols, lab, d, stats, np.lexsort((d, lab)))
+
+
+def face_heading(unsearched, pos, yaw_deg):
+    """World heading (deg) that puts the most unsearched cells within SEARCH_FACE_RADIUS_M of `pos`
+    inside SEARCH_FACE_HALF_FOV_DEG, or None when fewer than SEARCH_FACE_MIN_CELLS would be in view
+    or the camera already faces them (best heading within SEARCH_FACE_HALF_FOV_DEG of yaw_deg).
+
+    Reaching a search target used to mark everything around it searched whichever way the camera
+    pointed (seed 10: the rover stood 4.4 m from the east-nook sample and turned away from it).
+    """
+    if not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
+        return None
+    r = int(np.ceil(SEARCH_FACE_RADIUS_M)) + 1
+    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
+    y0, y1 = max(cy - r, 0), min(cy + r + 1, unsearched.shape[0])
+    x0, x1 = max(cx - r, 0), min(cx + r + 1, unsearched.shape[1])
+    rows, cols = np.nonzero(unsearched[y0:y1, x0:x1])
+    dx, dy = cols + x0 + 0.5 - pos[0], rows + y0 + 0.5 - pos[1]
+    near = np.hypot(dx, dy) <= SEARCH_FACE_RADIUS_M
+    if near.sum() < SEARCH_FACE_MIN_CELLS:
+        return None
+    bearing = np.degrees(np.arctan2(dy[near], dx[near]))
+    headings = np.arange(0.0, 360.0, SEARCH_FACE_STEP_DEG)
+    off = np.abs((bearing[None, :] - headings[:, None] + 180.0) % 360.0 - 180.0)
+    counts = (off <= SEARCH_FACE_HALF_FOV_DEG).sum(axis=1)
+    best = int(np.argmax(counts))
+    if counts[best] < SEARCH_FACE_MIN_CELLS:
+        return None
+    if abs((headings[best] - yaw_deg + 180.0) % 360.0 - 180.0) <= SEARCH_FACE_HALF_FOV_DEG:
+        return None
+    return float(headings[best])
+
+
+def nearest_target(targets):
+    """(row, col) of the target with the lowest path cost, or None."""
+    if len(targets) == 0:
+        return None
+    k = int(np.argmin(targets[:, 2]))
+    return int(targets[k, 0]), int(targets[k, 1])
+
+
+def nearer_search_goal(peek, far, dist, look=None):
+    """("peek" | "search" | "look", cell) for whichever of the best pocket peek, the best far-floor cell
+    and the best stand beside unsearched wall feet is nearer by path, or None when none exists.
 
     Both are places a small sample may hide; the search visits them nearest first. Peeks used to
     go first wherever they were: on seed 0 the rover stood 4 m from the unsearched tip of the
     north arm (where the sixth sample lay) and drove 180 m to a peek at the south tip first.
     """
-    options = [(float(dist[cell]), kind, cell) for kind, cell in (("peek", peek), ("search", far))
+    options = [(float(dist[cell]), kind, cell) for kind, cell in (("peek", peek), ("search", far), ("look", look))
                if cell is not None and np.isfinite(dist[cell])]
     if not options:
         return None

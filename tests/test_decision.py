@@ -373,3 +373,25 @@ def test_leaving_a_pickup_spot_turns_to_the_way_on_before_driving(leaving_pickup
     cmd = decision._drive_heading(r.nav, s, math.radians(5.0), 3.0, planned=True)
     r.nav.rotate_heading = None
     assert not r.nav.leaving_pickup  # facing the way on: the next turns are ordinary driving
+
+
+def test_a_reached_search_goal_turns_to_face_an_unsearched_nook_first():
+    """Seed 10: at a search goal 4.4 m from the east-nook sample the rover marked the place searched
+    and turned away; it must first face wall feet the camera never saw from close by."""
+    import perception
+    r = make_rover(pos=(121.5, 82.5), yaw=90.0, t=500.0)
+    mem = perception.get_memory(r)
+    mem.look_range[:] = 1.0  # everything seen from close...
+    mem.look_range[76:80, 123:127] = np.inf  # ...but the south wall's foot at x 123-126
+    s = decision._read_inputs(r)
+    r.nav.path_goal = ("search", (82, 121))  # reached
+    r.nav.path_xy, r.nav.path_idx, r.nav.plan_time = np.array([(120.5, 82.5), (121.5, 82.5)]), 0, s.t
+    decision.mode_search(r, r.nav, s)
+    assert r.nav.rotate_heading is not None, "turns to look before calling the place searched"
+    bearing = math.degrees(math.atan2(79.5 - 82.5, 124.5 - 121.5)) % 360.0  # about 315 deg
+    assert abs((r.nav.rotate_heading - bearing + 180.0) % 360.0 - 180.0) <= 30.0
+    assert not r.nav.search_done[82, 121], "not searched until the camera has faced it"
+    mem.look_range[:] = 1.0  # now seen from close
+    r.nav.rotate_heading = None
+    decision.mode_search(r, r.nav, s)
+    assert r.nav.rotate_heading is None and r.nav.search_done[82, 121]

@@ -314,3 +314,61 @@ def test_a_just_chosen_frontier_is_kept_while_the_rover_turns_away_from_the_othe
     pos = (100.5, 100.5)
     assert explore.choose_target(targets, pos, 180.0, current=(100, 150)) == (100, 50)  # facing west: west wins
     assert explore.choose_target(targets, pos, 180.0, current=(100, 150), keep_margin_m=math.inf) == (100, 150)
+
+
+def _nook_scene():
+    """A corridor along x with a 3-cell nook in its south wall, mapped as wall from afar (seed 10's east nook)."""
+    free = np.zeros((200, 200), bool)
+    free[110:114, 120:180] = True  # corridor floor, rows 110-113
+    obstacle = ~free
+    return free, obstacle
+
+
+def test_a_nook_seen_only_from_the_side_is_still_unsearched_and_gets_faced():
+    """Seed 10: the rover stood 4.4 m from the east-nook sample, facing away, and called the place searched."""
+    free, obstacle = _nook_scene()
+    looked = np.zeros((200, 200), bool)
+    looked[100:120, 110:190] = True  # the camera saw the corridor and its walls from close...
+    looked[105:110, 146:151] = False  # ...but the south wall's foot at x 146-150 only from afar or from the side
+    feet = explore.unsearched_wall_feet(free, obstacle, looked)
+    assert feet[109, 147:150].all(), "the nook's wall feet stay unsearched"
+    assert not feet[111, 140] and not feet[109, 140] and not feet[114, 148], "floor and wall feet seen from close are not"
+    heading = explore.face_heading(feet, (145.0, 111.0), 90.0)  # standing 4 m west of the nook, facing north
+    assert heading is not None
+    bearing = math.degrees(math.atan2(109.5 - 111.0, 148.5 - 145.0)) % 360.0  # about 337 deg
+    assert abs((heading - bearing + 180.0) % 360.0 - 180.0) <= explore.SEARCH_FACE_HALF_FOV_DEG
+
+
+def test_no_turn_when_the_camera_faces_the_nook_or_it_was_searched():
+    free, obstacle = _nook_scene()
+    looked = np.zeros((200, 200), bool)
+    looked[100:120, 110:190] = True
+    looked[105:110, 146:151] = False
+    feet = explore.unsearched_wall_feet(free, obstacle, looked)
+    assert explore.face_heading(feet, (145.0, 111.0), 340.0) is None  # already facing it
+    assert explore.face_heading(feet, (120.0, 111.0), 90.0) is None  # nothing unsearched within reach
+    looked[105:118, 130:155] = True  # the nook was seen from close
+    feet = explore.unsearched_wall_feet(free, obstacle, looked)
+    assert explore.face_heading(feet, (145.0, 111.0), 90.0) is None
+
+
+def test_the_search_visits_an_unsearched_nook_beside_the_trail():
+    """Seeds 10 and 23: the nook lay 4-5 m from the trail, so no far-floor target ever went near it."""
+    free, obstacle = _nook_scene()
+    looked = np.zeros((200, 200), bool)
+    looked[100:120, 110:190] = True
+    looked[105:110, 146:151] = False
+    feet = explore.unsearched_wall_feet(free, obstacle, looked)
+    dist, _ = astar.distance_field(grid.cost_grid(free, obstacle), (111, 125))
+    done = np.zeros((200, 200), bool)
+    t = explore.look_targets(feet, free, done, dist)
+    assert len(t) == 1
+    row, col, cost, size = t[0]
+    assert row == 110 and 145 <= col <= 151, "a floor cell right beside the nook"
+    assert explore.nearest_target(t) == (int(row), int(col)) and np.isfinite(cost)
+    assert explore.nearer_search_goal(None, None, dist, explore.nearest_target(t)) == ("look", (110, int(col)))
+    explore.ignore_disc(done, (int(row), int(col)), explore.SEARCH_FACE_RADIUS_M)
+    assert len(explore.look_targets(feet, free, done, dist)) == 0, "visited and faced: searched"
+    looked[:] = True
+    assert len(explore.look_targets(explore.unsearched_wall_feet(free, obstacle, looked), free,
+                                    np.zeros((200, 200), bool), dist)) == 0, "seen from close: searched"
