@@ -974,7 +974,7 @@ def _plan_search(rover, nav, s):
     chosen = explore.nearer_search_goal(_peek_goal(rover, nav, s, free, dist),
                                         explore.search_target(free, nav.visits.visited(), nav.search_done, dist),
                                         dist,
-                                        explore.nearest_target(explore.look_targets(unsearched, free,
+                                        explore.nearest_target(explore.look_targets(unsearched, free, nav.visits.visited(),
                                                                                     nav.search_done, dist)))
     kind, goal = chosen if chosen is not None else ("search", None)
     if goal is None:

@@ -31,7 +31,8 @@ PEEK_MIN_CELLS = 3  # shadowed-floor clusters smaller than this are not worth a 
 PEEK_MIN_DEPTH_M = 2.0  # ...nor those not reaching this far from sunlit floor (a shadowed fringe along a wall), m
 PEEK_MAX_DEPTH_M = 3.5  # the rover peeks no deeper into shadow than this (dark slots are traps; 3 m more are seen), m
 PEEK_DONE_M = 1.5  # a reached peek target rules out the shadowed floor this close to it, m
-SEARCH_LOOK_M = 3.0  # a wall foot counts as searched once the camera saw it from this close (its footprint is its field of view), m
+SEARCH_LOOK_M = 4.0  # a wall foot counts as searched once the camera saw it from this close (its footprint is its field of view; perception records looks up to 4 m), m
+SEARCH_LOOK_TRAIL_M = 5.0  # the search visits unsearched wall feet this close to the trail (farther ones are the far-floor search's), m
 SEARCH_LOOK_MIN_CELLS = 3  # smaller clusters of unsearched wall feet are not worth a visit (a sample nook is wider), cells
 SEARCH_FACE_RADIUS_M = 5.0  # at a reached search / peek target the rover turns to face unsearched wall feet this close, m
 SEARCH_FACE_HALF_FOV_DEG = 30.0  # ...counting those within this half-angle of a heading (inside the camera's ~55 deg), degrees
@@ -213,14 +214,17 @@ def unsearched_wall_feet(free, obstacle, looked):
     return obstacle & floor_near & ~looked
 
 
-def look_targets(unsearched, free, done, dist):
-    """Clusters of unsearched wall feet (minus `done` cells), each with the floor cell beside it that is
-    nearest by path: one (row, col, path_cost, size) per cluster, like frontier_targets.
+def look_targets(unsearched, free, visited, done, dist):
+    """Clusters of unsearched wall feet within SEARCH_LOOK_TRAIL_M of the trail (`visited`, minus `done`
+    cells), each with the floor cell beside it that is nearest by path: one (row, col, path_cost, size)
+    per cluster, like frontier_targets.
 
     The far-floor search visits floor away from the trail and so never went near a nook beside it
     (seeds 10 and 23: the east-nook sample lay 4-5 m from the trail, never in the camera's view).
+    Wall feet farther from the trail get faced when a far-floor visit nears them (face_heading).
     """
-    mask = unsearched & ~done
+    trail_dist = cv2.distanceTransform((~visited).astype(np.uint8), cv2.DIST_L2, 3)
+    mask = unsearched & ~done & (trail_dist <= SEARCH_LOOK_TRAIL_M)
     mask[0, :] = mask[-1, :] = mask[:, 0] = mask[:, -1] = False
     if not mask.any():
         return np.zeros((0, 4))

@@ -361,14 +361,17 @@ def test_the_search_visits_an_unsearched_nook_beside_the_trail():
     feet = explore.unsearched_wall_feet(free, obstacle, looked)
     dist, _ = astar.distance_field(grid.cost_grid(free, obstacle), (111, 125))
     done = np.zeros((200, 200), bool)
-    t = explore.look_targets(feet, free, done, dist)
+    visited = np.zeros((200, 200), bool)
+    visited[113, 120:180] = True  # driven along the corridor's north edge: the nook is 4 m off the trail
+    assert len(explore.look_targets(feet, free, np.zeros((200, 200), bool), done, dist)) == 0, "far from any trail"
+    t = explore.look_targets(feet, free, visited, done, dist)
     assert len(t) == 1
     row, col, cost, size = t[0]
     assert row == 110 and 145 <= col <= 151, "a floor cell right beside the nook"
     assert explore.nearest_target(t) == (int(row), int(col)) and np.isfinite(cost)
     assert explore.nearer_search_goal(None, None, dist, explore.nearest_target(t)) == ("look", (110, int(col)))
     explore.ignore_disc(done, (int(row), int(col)), explore.SEARCH_FACE_RADIUS_M)
-    assert len(explore.look_targets(feet, free, done, dist)) == 0, "visited and faced: searched"
+    assert len(explore.look_targets(feet, free, visited, done, dist)) == 0, "visited and faced: searched"
     looked[:] = True
-    assert len(explore.look_targets(explore.unsearched_wall_feet(free, obstacle, looked), free,
+    assert len(explore.look_targets(explore.unsearched_wall_feet(free, obstacle, looked), free, visited,
                                     np.zeros((200, 200), bool), dist)) == 0, "seen from close: searched"
