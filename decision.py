@@ -17,7 +17,9 @@ Modes (one handler function each):
 - pickup:  stop, request the pickup once when near_sample and stopped, wait;
 - search:  map complete but samples missing: peek into shadowed floor the
   camera never saw from close (dark pockets hide small samples) and visit
-  mapped floor far from the trail (pockets at the arms' tips), nearest first;
+  mapped floor far from the trail (pockets at the arms' tips) and wall feet
+  beside the trail the camera never faced from close (nooks), nearest first,
+  turning to face unsearched wall feet at each goal reached;
 - home:    plan back to the start and stop there;
 - done:    parked at home with everything collected (or time is up).
 
