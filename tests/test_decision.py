@@ -375,16 +375,16 @@ def test_leaving_a_pickup_spot_turns_to_the_way_on_before_driving(leaving_pickup
     assert not r.nav.leaving_pickup  # facing the way on: the next turns are ordinary driving
 
 
-def test_a_reached_search_goal_turns_to_face_an_unsearched_nook_first():
+def test_a_reached_look_goal_turns_to_face_an_unsearched_nook_first():
     """Seed 10: at a search goal 4.4 m from the east-nook sample the rover marked the place searched
-    and turned away; it must first face wall feet the camera never saw from close by."""
+    and turned away; a goal beside a nook must first face wall feet the camera never saw from close by."""
     import perception
     r = make_rover(pos=(121.5, 82.5), yaw=90.0, t=500.0)
     mem = perception.get_memory(r)
     mem.look_range[:] = 1.0  # everything seen from close...
     mem.look_range[76:80, 123:127] = np.inf  # ...but the south wall's foot at x 123-126
     s = decision._read_inputs(r)
-    r.nav.path_goal = ("search", (82, 121))  # reached
+    r.nav.path_goal = ("look", (82, 121))  # reached
     r.nav.path_xy, r.nav.path_idx, r.nav.plan_time = np.array([(120.5, 82.5), (121.5, 82.5)]), 0, s.t
     decision.mode_search(r, r.nav, s)
     assert r.nav.rotate_heading is not None, "turns to look before calling the place searched"
