@@ -86,6 +86,7 @@ FILL_MIN_NEIGHBOURS = 5  # a seen cell with at least this many of its 8 neighbou
 FILL_MIN_SAND_SHARE = 0.1  # ...when light plus shadowed sand make up at least this share of its votes, 0..1
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 LOOK_RANGE_MAX_M = 4.0  # the closest-look map (how near the camera has seen each cell) records looks up to this, m
+LOOK_HALF_ANGLE_DEG = 40.0  # ...and only this far off the rover's heading, deg (a sample at the image's side edge is cut off or a few px; seed 0 passed the east-nook rock 50-80 deg off-axis and called it searched)
 
 # --- rocks ---
 ROCK_MAX_RANGE_M = 9.0  # rock detections farther than this are not remembered, m
@@ -312,7 +313,9 @@ def _build_tables():
     map_dist = dist.ravel()[_MAP_CELLS]
     _MAP_WEIGHT = 1.0 - (1.0 - MAP_RANGE_FALLOFF) * map_dist / MAP_RANGE_M
     _MAP_DIST = map_dist.astype(np.float32)
-    _MAP_LOOK = _MAP_DIST <= LOOK_RANGE_MAX_M  # voting cells that also update the closest-look map
+    map_angle = angle.ravel()[_MAP_CELLS]
+    # voting cells that also update the closest-look map: near, and in the middle of the view
+    _MAP_LOOK = (_MAP_DIST <= LOOK_RANGE_MAX_M) & (np.abs(map_angle) <= math.radians(LOOK_HALF_ANGLE_DEG))
     _HORIZON_ROW = int(math.floor(CY))  # rows above this never see the floor of a level camera
     _LEVEL_H = ground_homography(0.0, 0.0)
 
@@ -352,7 +355,7 @@ class PerceptionMemory:
     dim_shade_votes: float32 (200, 200); the part of obs_votes that was darker sand in shadow
         (SHADE_SAND_MIN_R up to POCKET_SAND_MIN_R): navigable on the scored map only.
     look_range: float32 (200, 200); the closest range (m) from which the camera has seen
-        each cell (inf: never within LOOK_RANGE_MAX_M).  Small samples only show from close
+        each cell within LOOK_HALF_ANGLE_DEG of the heading (inf: never within LOOK_RANGE_MAX_M).  Small samples only show from close
         by, so the sample search reads it through :func:`looked_at_within`.
     last_grid: uint8 top-down label grid of the last frame (0 unknown, 1 obstacle, 2 navigable,
         3 sand in shadow, 4 darker sand in shadow),

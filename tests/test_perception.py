@@ -411,3 +411,17 @@ def test_closest_look_map_records_how_near_the_camera_saw_each_cell():
     P.perception_step(r)
     assert P.get_memory(r).look_range[100, 106] <= 3.5
     assert P.get_memory(r).look_range[100, 102] == before  # now behind the rover: it keeps its closest look
+
+
+def test_closest_look_map_ignores_cells_at_the_side_of_the_view():
+    """A cell seen 50-80 deg off the heading is not looked at (a sample there is cut off by the image edge)."""
+    r = _rover(_synthetic(sand_from_row=84), pos=(100.0, 100.0), yaw=0.0)
+    P.perception_step(r)
+    looked = np.isfinite(P.get_memory(r).look_range)
+    ys, xs = np.nonzero(looked)
+    off_axis = np.degrees(np.abs(np.arctan2(ys + 0.5 - 100.0, xs + 0.5 - 100.0)))
+    assert looked.any() and off_axis.max() <= P.LOOK_HALF_ANGLE_DEG + 15  # cell-centre slack on 1 m cells
+    # the cells 1-2 m ahead and 2-3 m aside (45-70 deg off the heading; the camera's view reaches
+    # their near corner, so a rule without the angle records them at ~2.8 m) are not looked at
+    assert not looked[102, 101] and not looked[97, 101]
+    assert looked[100, 101] and looked[100, 102]  # straight ahead they are
