@@ -339,11 +339,17 @@ def test_a_nook_seen_only_from_the_side_is_still_unsearched_and_gets_faced():
     assert abs((heading - bearing + 180.0) % 360.0 - 180.0) <= explore.SEARCH_FACE_HALF_FOV_DEG
 
 
-def test_no_turn_when_the_camera_faces_the_nook_or_it_was_searched():
+def _nook_seen_from_afar():
+    """The nook scene with the corridor seen from close, but the nook's wall feet only from afar."""
     free, obstacle = _nook_scene()
     looked = np.zeros((200, 200), bool)
     looked[100:120, 110:190] = True
     looked[105:110, 146:151] = False
+    return free, obstacle, looked
+
+
+def test_no_turn_when_the_camera_faces_the_nook_or_it_was_searched():
+    free, obstacle, looked = _nook_seen_from_afar()
     feet = explore.unsearched_wall_feet(free, obstacle, looked)
     assert explore.face_heading(feet, (145.0, 111.0), 340.0) is None  # already facing it
     assert explore.face_heading(feet, (120.0, 111.0), 90.0) is None  # nothing unsearched within reach
@@ -354,10 +360,7 @@ def test_no_turn_when_the_camera_faces_the_nook_or_it_was_searched():
 
 def test_the_search_visits_an_unsearched_nook_beside_the_trail():
     """Seeds 10 and 23: the nook lay 4-5 m from the trail, so no far-floor target ever went near it."""
-    free, obstacle = _nook_scene()
-    looked = np.zeros((200, 200), bool)
-    looked[100:120, 110:190] = True
-    looked[105:110, 146:151] = False
+    free, obstacle, looked = _nook_seen_from_afar()
     feet = explore.unsearched_wall_feet(free, obstacle, looked)
     dist, _ = astar.distance_field(grid.cost_grid(free, obstacle), (111, 125))
     done = np.zeros((200, 200), bool)
