@@ -92,8 +92,7 @@ def compare(log_path, world, stride: int = DEFAULT_STRIDE, progress: bool = Fals
         from replay.runner import frame_time
         from sim.tracks import replay_quads
 
-        times = [frame_time(f) for f in data.frames]
-        laid = dict(replay_quads([(f.x, f.y, f.yaw) for f in data.frames], None if None in times else times,
+        laid = dict(replay_quads([(f.x, f.y, f.yaw) for f in data.frames], [frame_time(f) for f in data.frames],
                                  world, rows))
     it = frames
     if progress:

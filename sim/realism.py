@@ -104,8 +104,7 @@ def replay_tracks(frames: list, keep, world) -> dict:
     """{index: tyre-track quads in that frame} for the indices in `keep`, laid along all `frames`."""
     from sim.tracks import replay_quads
 
-    times = [f.time for f in frames]
-    return dict(replay_quads([f.pose[:3] for f in frames], None if None in times else times, world, keep))
+    return dict(replay_quads([f.pose[:3] for f in frames], [f.time for f in frames], world, keep))
 
 
 def standard_warp():

@@ -180,13 +180,16 @@ def replay_quads(poses, times=None, world=None, keep=None):
     """Tyre tracks along a logged drive: yields (row index, quads array) for every row in `keep`
     (all rows when None), with the tracks the real simulator would show in that row's frame.
 
-    poses: (x, y, yaw_deg) per logged row, in order. times: seconds per row (None: unknown).
+    poses: (x, y, yaw_deg) per logged row, in order. times: seconds per row (None, or None for any
+    row: unknown, so no row is interpolated — a log's times are used for all rows or for none).
     A log is written at 15-21 Hz while the simulator lays tracks in each rendered frame (~30 Hz),
     so poses are interpolated between rows at REPLAY_RENDER_FPS when the rows' times are known;
     without times, one update per row. All wheels are taken as grounded.
     """
     tracks = TyreTracks(world)
     keep = None if keep is None else set(keep)
+    if times is not None and any(t is None for t in times):
+        times = None
     prev = prev_t = None
     for i, (x, y, yaw) in enumerate(poses):
         t = None if times is None else times[i]

@@ -116,6 +116,9 @@ def test_replay_lays_tracks_between_logged_rows_at_the_render_rate():
     assert sorted(kept) == [5, 9] and np.array_equal(kept[9], with_times[9])
     paused = dict(tracks.replay_quads([(100.0, 100.0, 0.0), (104.0, 100.0, 0.0)], [0.0, 5.0]))
     assert len(paused[1]) == 4
+    # a log whose rows do not all carry a time is replayed as one without times (one update per row)
+    partly = dict(tracks.replay_quads(poses, times[:-1] + [None]))
+    assert len(partly[rows - 1]) == len(without[rows - 1])
 
 
 def test_realism_replay_draws_the_tracks_of_the_logged_drive(flat_renderer):
