@@ -1,0 +1,20 @@
+"""replay.vote_sources: the kept votes rebuild the replay's own map, and leaving votes out is measured."""
+import numpy as np
+
+from evaluation.metrics import score_map
+from replay.vote_sources import attribute, collect, error_image, rebuild
+
+
+def test_votes_rebuild_the_replayed_map_and_attribute_every_class(test_dataset_dir, ground_truth):
+    votes = collect(test_dataset_dir, ground_truth)
+    # the attribution sees exactly the votes perception cast: same scored map, cell for cell
+    assert np.array_equal(rebuild(votes)[:, :, 2], votes.worldmap[:, :, 2])
+    report = attribute(votes, ground_truth)
+    base = score_map(votes.worldmap, ground_truth)
+    assert report["all"]["false_cells"] == base.marked_cells - base.good_cells
+    ranges = report["factors"]["range"]
+    assert abs(sum(r["votes_pct"] for r in ranges) - 100.0) < 0.5
+    # leaving out the far band (half of all votes) changes the map: removal is really applied
+    assert ranges[-1]["without_mapped_pct"] < report["all"]["mapped_pct"] - 1.0
+    img = error_image(votes.worldmap, ground_truth, votes.features)
+    assert img.shape[2] == 3 and (img[:, :, 2] == 255).any()  # some false navigable cells are drawn red
