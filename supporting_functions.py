@@ -55,6 +55,9 @@ ROVER_MARK_RADIUS_PX = 2  # radius of the rover position mark, px
 _NUMBER_RE = re.compile(r"([+-]?)([0-9.,]*)(?:[eE]([+-]?[0-9]+))?")
 _IGNORED_CHARS = re.compile("[\\s\u00a0\u202f\u2009']")  # group separators of other locales
 _SPECIAL = {"nan": math.nan, "inf": math.inf, "infinity": math.inf, "\u221e": math.inf}
+# the common case, a plain en-US N4/N2 number without group separators ("-12.3456"): float() reads it
+# exactly as the general rules below would, at a tenth of their cost (21 numbers per telemetry frame)
+_PLAIN_NUMBER_RE = re.compile(r"-?[0-9]+(?:\.[0-9]+)?")
 
 
 def parse_number(text) -> Optional[float]:
@@ -68,6 +71,13 @@ def parse_number(text) -> Optional[float]:
     the decimal point: ``N4`` always prints decimals, so ``"1,234"`` can only
     mean 1.234.
     """
+    if isinstance(text, str) and _PLAIN_NUMBER_RE.fullmatch(text):
+        return float(text)
+    return _parse_number_general(text)
+
+
+def _parse_number_general(text) -> Optional[float]:
+    """parse_number without its fast path (every locale rule; tests compare the two)."""
     if isinstance(text, bool):
         return None
     if isinstance(text, (int, float)):  # the simulator never sends numbers, a twin might

@@ -74,6 +74,20 @@ def test_format_dotnet_number_round_trips(value, locale):
     assert sf.parse_number(text) == pytest.approx(value, abs=1e-4)
 
 
+def test_parse_number_fast_path_equals_the_general_rules():
+    """The plain-number fast path must read every string exactly as the locale rules do (bit for bit)."""
+    rng = np.random.default_rng(0)
+    values = np.concatenate([rng.uniform(-400, 400, 300), rng.uniform(-2, 2, 100), [0.0, -0.0, 5e-5, -5e-5]])
+    texts = ["0", "-0", "007.5", "-0.0000", "12.", ".5", "1e3", "+3", "1_000", " 4.5", "١.5"]
+    for v in values:
+        for decimals in (2, 4):
+            texts += [sf.format_dotnet_number(v, decimals, loc) for loc in ("en-US", "de-DE")]
+    for text in texts:
+        fast, general = sf.parse_number(text), sf._parse_number_general(text)
+        assert (fast is None and general is None) or (
+            fast == general and math.copysign(1, fast) == math.copysign(1, general)), text
+
+
 def test_format_dotnet_number_matches_n4():
     assert sf.format_dotnet_number(1234.56789, 4, "en-US") == "1,234.5679"
     assert sf.format_dotnet_number(1234.56789, 4, "de-DE") == "1.234,5679"

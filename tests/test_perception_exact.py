@@ -1,0 +1,89 @@
+"""The compiled and rewritten hot paths of perception give bit-identical maps to the plain NumPy
+versions they replaced (kept here as references): speed work must not change a single vote."""
+import math
+
+import cv2
+import numpy as np
+
+import perception as P
+from rover_state import RoverState
+
+
+def _reference_vote(mem, grid, x, y, yaw):
+    """The NumPy vote as it was before the compiled kernel (the reference for bit-exactness)."""
+    labels = grid.ravel()[P._MAP_CELLS]
+    known = labels != P._LABEL_UNKNOWN
+    xw, yw = P.rover_to_world(P._MAP_X[known], P._MAP_Y[known], x, y, yaw)
+    ix = np.floor(xw).astype(np.int64)
+    iy = np.floor(yw).astype(np.int64)
+    inside = (ix >= 0) & (ix < P.WORLD_SIZE) & (iy >= 0) & (iy < P.WORLD_SIZE)
+    ix, iy = ix[inside], iy[inside]
+    known_idx = np.flatnonzero(known)[inside]
+    if ix.size == 0:
+        return None
+    x0, x1, y0, y1 = int(ix.min()), int(ix.max()) + 1, int(iy.min()), int(iy.max()) + 1
+    w_cols = x1 - x0
+    local = (iy - y0) * w_cols + (ix - x0)
+    w = P._MAP_WEIGHT[known_idx]
+    kind = labels[known_idx]
+    is_nav = kind == P._LABEL_NAV
+    size = (y1 - y0) * w_cols
+    for label, votes in ((P._LABEL_SHADE, mem.shade_votes), (P._LABEL_DIM_SHADE, mem.dim_shade_votes)):
+        is_shade = kind == label
+        if is_shade.any():
+            votes[y0:y1, x0:x1] += np.bincount(local[is_shade], w[is_shade] * P.OBS_VOTE_WEIGHT,
+                                               size).reshape(y1 - y0, w_cols)
+    mem.nav_votes[y0:y1, x0:x1] += np.bincount(local[is_nav], w[is_nav] * P.NAV_VOTE_WEIGHT,
+                                               size).reshape(y1 - y0, w_cols)
+    mem.obs_votes[y0:y1, x0:x1] += np.bincount(local[~is_nav], w[~is_nav] * P.OBS_VOTE_WEIGHT,
+                                               size).reshape(y1 - y0, w_cols)
+    near = P._MAP_LOOK[known_idx]
+    np.minimum.at(mem.look_range, (iy[near], ix[near]), P._MAP_DIST[known_idx[near]])
+    return y0, y1, x0, x1
+
+
+def _label_grid(img, pitch, roll):
+    """The label grid perception_step warps from a camera frame (light sand, shadowed and dim sand)."""
+    r = RoverState()
+    r.img, r.pos, r.yaw, r.pitch, r.roll = img, (100.0, 100.0), 0.0, pitch, roll
+    P.perception_step(r)
+    return P.get_memory(r).last_grid
+
+
+def _maps(mem):
+    return [mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.look_range]
+
+
+def test_compiled_vote_equals_the_numpy_reference_bit_for_bit(test_dataset_dir):
+    from replay.log_format import read_log
+
+    frames = read_log(test_dataset_dir).frames[::9]
+    rng = np.random.default_rng(3)
+    new, ref = P.PerceptionMemory(), P.PerceptionMemory()
+    poses = 0
+    for f in frames:
+        img = cv2.cvtColor(cv2.imread(str(f.image_path)), cv2.COLOR_BGR2RGB)
+        grid = _label_grid(img, rng.normal(0, 1.5), rng.normal(0, 1.5))
+        assert (grid == P._LABEL_NAV).any() and (grid == P._LABEL_OBSTACLE).any()
+        # the logged pose, a random one, and one hanging over the map's edge (cells fall off it)
+        for x, y, yaw in ((f.x, f.y, f.yaw), (rng.uniform(20, 180), rng.uniform(20, 180), rng.uniform(0, 360)),
+                          (rng.uniform(-3, 3), rng.uniform(190, 203), rng.uniform(0, 360))):
+            assert P._vote(new, grid, x, y, yaw) == _reference_vote(ref, grid, x, y, yaw)
+            poses += 1
+    assert poses > 60 and np.isfinite(ref.look_range).sum() > 500
+    for a, b in zip(_maps(new), _maps(ref)):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert P._vote(new, grid, -50.0, -50.0, 0.0) is None  # nothing on the map
+
+
+def test_compiled_vote_differs_when_a_vote_does():
+    """The comparison above can fail: one extra navigable cell changes the maps."""
+    grid = np.zeros((P._GRID_ROWS, P._GRID_COLS), np.uint8)
+    grid[30:40, 100:140] = P._LABEL_NAV
+    a, b = P.PerceptionMemory(), P.PerceptionMemory()
+    P._vote(a, grid, 100.0, 100.0, 30.0)
+    grid[35, 120] = P._LABEL_OBSTACLE
+    _reference_vote(b, grid, 100.0, 100.0, 30.0)
+    assert not np.array_equal(a.nav_votes, b.nav_votes)
+    assert math.isclose(float(a.nav_votes.sum() + a.obs_votes.sum()), float(b.nav_votes.sum() + b.obs_votes.sum()),
+                        rel_tol=1e-6)
