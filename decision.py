@@ -421,8 +421,7 @@ def _check_spinning(nav, s, mode):
         nav.spin_hist.popleft()
     if s.t - nav.spin_hist[0][0] < SPIN_WINDOW_S - 1.0 or nav.recovery is not None:
         return
-    h = np.asarray(nav.spin_hist)
-    if h[:, 1].mean() < SPIN_STOP_FRACTION or max(np.ptp(h[:, 2]), np.ptp(h[:, 3])) > SPIN_MAX_SPAN_M:
+    if _stop_share(nav.spin_hist) < SPIN_STOP_FRACTION or _span(nav.spin_hist, 2, 3) > SPIN_MAX_SPAN_M:
         return
     repeat = stuck.count_recent_nearby(nav.spin_events, s.t, s.pos)
     nav.spin_events.append((s.t, s.pos[0], s.pos[1]))
@@ -433,6 +432,19 @@ def _check_spinning(nav, s, mode):
     nav.rotate_heading = None
     nav.recovery = stuck.Recovery(s.t, _escape_side(nav, s), 1, ahead=ahead)
     nav.spin_hist.clear()
+
+
+def _stop_share(hist):
+    """Share of (t, turning in place?, x, y) entries turning in place (plain Python on the ~600 entries:
+    the same float64 value as the NumPy mean of the 0/1 column, without building an array every frame)."""
+    return sum(1 for entry in hist if entry[1]) / len(hist)
+
+
+def _span(hist, col_x, col_y):
+    """The larger of the x and y extents (max - min) of the entries' two position columns, m."""
+    xs = [entry[col_x] for entry in hist]
+    ys = [entry[col_y] for entry in hist]
+    return max(max(xs) - min(xs), max(ys) - min(ys))
 
 
 def _abandon_goal(nav, s):
@@ -606,14 +618,15 @@ def mode_forward(rover, nav, s):
 def mode_search(rover, nav, s):
     """Map complete, samples missing: peek into shadowed pockets and visit mapped floor far from
     the trail, nearest first; None when nothing is left."""
+    frame_maps = {}  # maps this frame's replan and face turn share (see _unsearched_wall_feet)
     if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or _needs_replan(nav, s):
-        _plan_search(rover, nav, s)
+        _plan_search(rover, nav, s, frame_maps)
     if not nav.search_left or nav.path_goal is None or len(nav.path_xy) < 2:
         return None
     kind, goal = nav.path_goal
     goal_xy = grid.cell_to_world(*goal)
     if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M or _goal_stalled(nav, s):
-        if kind in SEARCH_FACE_KINDS and _face_unsearched(rover, nav, s, goal):
+        if kind in SEARCH_FACE_KINDS and _face_unsearched(rover, nav, s, goal, frame_maps):
             return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
         radius = _search_done_radius(kind)
         explore.ignore_disc(nav.search_done, goal, radius)
@@ -627,7 +640,7 @@ def _search_done_radius(kind):
     return {"peek": explore.PEEK_DONE_M, "look": explore.SEARCH_FACE_RADIUS_M}.get(kind, explore.SEARCH_MIN_AWAY_M)
 
 
-def _face_unsearched(rover, nav, s, goal):
+def _face_unsearched(rover, nav, s, goal, frame_maps=None):
     """At a reached peek or look goal, turn to face nearby wall feet the camera never saw from close by
     (see explore.face_heading) before calling the place searched; True when a turn was started.
     At most SEARCH_FACES_PER_GOAL turns per goal, so a cell the camera cannot see never holds it.
@@ -638,8 +651,7 @@ def _face_unsearched(rover, nav, s, goal):
     if nav.search_faces >= SEARCH_FACES_PER_GOAL:
         return False
     free, obstacle, _unknown = _grids(rover)
-    looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
-    heading = explore.face_heading(explore.unsearched_wall_feet(free, obstacle, looked), s.pos, s.yaw)
+    heading = explore.face_heading(_unsearched_wall_feet(rover, frame_maps, free, obstacle), s.pos, s.yaw)
     if heading is None:
         return False
     nav.search_faces += 1
@@ -885,6 +897,19 @@ def _grids(rover):
     return grid.classify(wm)
 
 
+def _unsearched_wall_feet(rover, frame_maps, free, obstacle):
+    """explore.unsearched_wall_feet, computed once per frame: a search replan and the face turn at a
+    reached goal can both ask in the same frame, from the same drive map and look map. ``frame_maps``
+    is the frame's dict (None: no sharing)."""
+    cached = None if frame_maps is None else frame_maps.get("unsearched_wall_feet")
+    if cached is None:
+        looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
+        cached = explore.unsearched_wall_feet(free, obstacle, looked)
+        if frame_maps is not None:
+            frame_maps["unsearched_wall_feet"] = cached
+    return cached
+
+
 def _roughness(rover):
     """Per-cell roughness from perception's votes, or None before perception has run."""
     if getattr(rover, "perception_memory", None) is None:
@@ -967,15 +992,14 @@ def _plan_explore(rover, nav, s):
     _set_path(nav, s, "frontier", goal, astar.path_to(parent, cost.shape, goal))
 
 
-def _plan_search(rover, nav, s):
+def _plan_search(rover, nav, s, frame_maps=None):
     free, obstacle, _unknown = _grids(rover)
     cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=False, soft_obstacles=True,
                           rough=_roughness(rover))
     cell = grid.world_to_cell(s.pos)
     _open_around_rover(cost, cell)
     dist, parent = astar.distance_field(cost, cell)
-    looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
-    unsearched = explore.unsearched_wall_feet(free, obstacle, looked)
+    unsearched = _unsearched_wall_feet(rover, frame_maps, free, obstacle)
     chosen = explore.nearer_search_goal(_peek_goal(rover, nav, s, free, dist),
                                         explore.search_target(free, nav.visits.visited(), nav.search_done, dist),
                                         dist,

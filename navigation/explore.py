@@ -337,10 +337,13 @@ class LoopDetector:
     def circling(self):
         if len(self.hist) < 3:
             return False
-        h = np.asarray(self.hist)
-        turn = abs(h[-1, 3] - h[0, 3])
-        span = max(np.ptp(h[:, 1]), np.ptp(h[:, 2]))
-        return bool(turn >= CIRCLE_TURN_DEG and span <= CIRCLE_MAX_SPAN_M)
+        # plain Python on the deque (the same float64 values as NumPy would give): this runs every
+        # frame, and building an array of ~600 tuples cost more than the rest of the test
+        if abs(self.hist[-1][3] - self.hist[0][3]) < CIRCLE_TURN_DEG:
+            return False
+        xs = [entry[1] for entry in self.hist]
+        ys = [entry[2] for entry in self.hist]
+        return max(max(xs) - min(xs), max(ys) - min(ys)) <= CIRCLE_MAX_SPAN_M
 
     def reset(self):
         self.hist.clear()
