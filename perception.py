@@ -675,17 +675,19 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, xp
     with cos c, sin s); writes (y0, y1, x0, x1) into ``window`` and returns False when no seen
     cell falls on the map.
 
-    Bit-exactness with the NumPy version: world coordinates are ``xpos + x c - y s`` and
+    Module constants are passed in, never read as globals (numba would freeze them at compile
+    time and a sweep that sets them would change nothing).  Bit-exactness with the NumPy version: world coordinates are ``xpos + x c - y s`` and
     ``ypos + x s + y c`` evaluated left to right in float64 (no fast-math, so no fused
     multiply-add); each map cell's votes are summed in float64 in cell order, as ``np.bincount``
     sums them, and added once to the float32 map through float64, as ``float32 += float64`` does.
     """
+    size_y, size_x = nav_votes.shape
     n = cells.size
     ix = np.empty(n, np.int64)
     iy = np.empty(n, np.int64)
     keep = np.empty(n, np.int64)
     m = 0
-    x0 = y0 = WORLD_SIZE
+    x0, y0 = size_x, size_y
     x1 = y1 = -1
     for k in range(n):
         if labels[cells[k]] == _LABEL_UNKNOWN:
@@ -694,7 +696,7 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, xp
         yw = ypos + map_x[k] * s + map_y[k] * c
         cx = int(math.floor(xw))
         cy = int(math.floor(yw))
-        if cx < 0 or cx >= WORLD_SIZE or cy < 0 or cy >= WORLD_SIZE:
+        if cx < 0 or cx >= size_x or cy < 0 or cy >= size_y:
             continue
         ix[m], iy[m], keep[m] = cx, cy, k
         m += 1
@@ -737,6 +739,73 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, xp
     return True
 
 
+def _pixel_labels(img: np.ndarray):
+    """(labels8, nav8, rock8, shade8) of a camera frame in one compiled pass.
+
+    labels8: 255 light sand, _SHADE_VALUE sand in shadow, _DIM_SHADE_VALUE darker sand in shadow,
+    0 anything else (what label_grid warps); the others uint8 0/255 masks as navigable_mask,
+    rock_mask and shadowed_sand_mask give them.  Bit for bit what the OpenCV/NumPy chain of
+    those functions gives (tests/test_perception_exact.py), at a fraction of its dozen passes.
+    """
+    if SHADE_SAND_WINDOW_H_PX != 1:  # the kernel slides a one-row window only
+        return _pixel_labels_opencv(img)
+    h, w = img.shape[:2]
+    labels8, nav8, rock8, shade8 = (np.empty((h, w), np.uint8) for _ in range(4))
+    _pixel_labels_kernel(img, np.array(NAV_RGB_MIN, np.int64), np.array(ROCK_RGB_MIN, np.int64),
+                         np.array(ROCK_RGB_MAX, np.int64), int(SHADE_SAND_MIN_R), int(POCKET_SAND_MIN_R),
+                         float(SHADE_SAND_MIN_G_PER_R), float(SHADE_SAND_MIN_B_PER_R),
+                         float(SHADE_SAND_MAX_SD) ** 2, int(SHADE_SAND_WINDOW_W_PX), int(SHADE_SAND_FIRST_ROW),
+                         _SHADE_VALUE, _DIM_SHADE_VALUE, labels8, nav8, rock8, shade8)
+    return labels8, nav8, rock8, shade8
+
+
+def _pixel_labels_opencv(img: np.ndarray):
+    """_pixel_labels as a chain of OpenCV/NumPy calls (the reference the kernel is tested against)."""
+    nav8 = cv2.inRange(img, NAV_RGB_MIN, (255, 255, 255))
+    rock8 = cv2.inRange(img, ROCK_RGB_MIN, ROCK_RGB_MAX)
+    shade8 = cv2.bitwise_and(shadowed_sand_u8(img), cv2.bitwise_not(nav8))
+    dim8 = cv2.bitwise_and(shade8, cv2.inRange(img, (0, 0, 0), (POCKET_SAND_MIN_R - 1, 255, 255)))
+    labels8 = cv2.bitwise_or(nav8, np.bitwise_and(shade8, np.uint8(_SHADE_VALUE)))
+    labels8 = cv2.subtract(labels8, np.bitwise_and(dim8, np.uint8(_SHADE_VALUE - _DIM_SHADE_VALUE)))
+    return labels8, nav8, rock8, shade8
+
+
+@njit(cache=True)
+def _pixel_labels_kernel(img, nav_min, rock_min, rock_max, shade_min_r, pocket_min_r, g_per_r, b_per_r, max_var,
+                         win_w, first_row, shade_value, dim_value, labels8, nav8, rock8, shade8):
+    """See _pixel_labels.  The texture test is shadowed_sand_u8's: the red mean and mean square over a
+    win_w x 1 window (reflected at the image edge) as OpenCV's boxFilter computes them for float32
+    (exact integer sums, times 1/win_w in float64, rounded to float32), then their float32 variance."""
+    h, w = img.shape[0], img.shape[1]
+    g_ratio, b_ratio = np.float32(g_per_r), np.float32(b_per_r)
+    inv = 1.0 / win_w
+    half = win_w // 2
+    for v in range(h):
+        for u in range(w):
+            r, g, b = img[v, u, 0], img[v, u, 1], img[v, u, 2]
+            nav = r >= nav_min[0] and g >= nav_min[1] and b >= nav_min[2]
+            rock = (rock_min[0] <= r <= rock_max[0] and rock_min[1] <= g <= rock_max[1]
+                    and rock_min[2] <= b <= rock_max[2])
+            shade = False
+            if v >= first_row and not nav and r >= shade_min_r:
+                red = np.float32(r)
+                if g >= g_ratio * red and b >= b_ratio * red:
+                    s1 = 0
+                    s2 = 0
+                    for k in range(u - half, u - half + win_w):
+                        kk = -k - 1 if k < 0 else (2 * w - k - 1 if k >= w else k)
+                        x = np.int64(img[v, kk, 0])
+                        s1 += x
+                        s2 += x * x
+                    mean = np.float32(s1 * inv)
+                    mean_sq = np.float32(s2 * inv)
+                    shade = mean_sq - mean * mean <= max_var
+            nav8[v, u] = 255 if nav else 0
+            rock8[v, u] = 255 if rock else 0
+            shade8[v, u] = 255 if shade else 0
+            labels8[v, u] = 255 if nav else ((dim_value if r < pocket_min_r else shade_value) if shade else 0)
+
+
 def perception_step(rover):
     """Fill the perception block of RoverState from rover.img and the pose; returns rover."""
     mem = get_memory(rover)
@@ -750,12 +819,7 @@ def perception_step(rover):
     pitch = _signed(rover.pitch) if _finite(rover.pitch) else 0.0
     roll = _signed(rover.roll) if _finite(rover.roll) else 0.0
 
-    nav8 = cv2.inRange(img, NAV_RGB_MIN, (255, 255, 255))
-    rock8 = cv2.inRange(img, ROCK_RGB_MIN, ROCK_RGB_MAX)
-    shade8 = cv2.bitwise_and(shadowed_sand_u8(img), cv2.bitwise_not(nav8))
-    dim8 = cv2.bitwise_and(shade8, cv2.inRange(img, (0, 0, 0), (POCKET_SAND_MIN_R - 1, 255, 255)))
-    labels8 = cv2.bitwise_or(nav8, np.bitwise_and(shade8, np.uint8(_SHADE_VALUE)))
-    labels8 = cv2.subtract(labels8, np.bitwise_and(dim8, np.uint8(_SHADE_VALUE - _DIM_SHADE_VALUE)))
+    labels8, nav8, rock8, shade8 = _pixel_labels(img)
     grid = _warp_labels(labels8, pitch, roll)
     mem.last_grid = grid
 

@@ -87,3 +87,48 @@ def test_compiled_vote_differs_when_a_vote_does():
     assert not np.array_equal(a.nav_votes, b.nav_votes)
     assert math.isclose(float(a.nav_votes.sum() + a.obs_votes.sum()), float(b.nav_votes.sum() + b.obs_votes.sum()),
                         rel_tol=1e-6)
+
+
+def _colour_sweep_images():
+    """Images holding every (red, green) and every (red, blue) pair, with smooth and rough rows: every
+    colour threshold and the texture test's boundary get crossed."""
+    r, other = np.meshgrid(np.arange(256, dtype=np.uint8), np.arange(256, dtype=np.uint8), indexing="ij")
+    images = []
+    for fixed in (0, 120, 200, 255):
+        for green_varies in (True, False):
+            big = np.full((256, 256, 3), fixed, np.uint8)
+            big[:, :, 0] = r
+            big[:, :, 1 if green_varies else 2] = other
+            for top in range(0, 256, 160):  # 160x320 frames: two 256-wide blocks side by side
+                img = np.zeros((160, 320, 3), np.uint8)
+                part = big[top:top + 160]
+                img[:part.shape[0], :256] = part
+                img[:part.shape[0], 256:] = part[:, :64]
+                images.append(img)
+    return images
+
+
+def test_compiled_pixel_labels_equal_the_opencv_chain_bit_for_bit(test_dataset_dir):
+    from replay.log_format import read_log
+
+    rng = np.random.default_rng(5)
+    frames = [cv2.cvtColor(cv2.imread(str(f.image_path)), cv2.COLOR_BGR2RGB)
+              for f in read_log(test_dataset_dir).frames[::4]]
+    # narrow-range noise puts many windows right at the texture test's variance limit
+    noisy = [np.clip(rng.normal(rng.uniform(100, 200), rng.uniform(2, 14), (160, 320, 3)), 0, 255).astype(np.uint8)
+             for _ in range(20)]
+    shade_pixels = 0
+    for img in frames + noisy + _colour_sweep_images():
+        new, ref = P._pixel_labels(img), P._pixel_labels_opencv(img)
+        for a, b in zip(new, ref):
+            assert a.dtype == np.uint8 and np.array_equal(a, b)
+        shade_pixels += int((ref[3] > 0).sum())
+    assert shade_pixels > 10000
+
+
+def test_pixel_labels_follow_changed_thresholds(monkeypatch):
+    """Constants are read at call time (a sweep sets them), not frozen into the compiled kernel."""
+    img = np.full((160, 320, 3), 150, np.uint8)
+    assert not P._pixel_labels(img)[1].any()
+    monkeypatch.setattr(P, "NAV_RGB_MIN", (140, 140, 140))
+    assert P._pixel_labels(img)[1].all()
