@@ -164,15 +164,19 @@ def _b64_to_bytes(b64) -> Optional[bytes]:
     return raw or None
 
 
+# OpenCV >= 4.10 decodes straight to RGB (the same pixels as BGR + cvtColor, one pass less); older: None
+_IMREAD_RGB = getattr(cv2, "IMREAD_COLOR_RGB", None)
+
+
 def _decode_jpeg_bytes(raw: bytes) -> Optional[np.ndarray]:
     buf = np.frombuffer(raw, dtype=np.uint8)
     try:
-        bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        img = cv2.imdecode(buf, cv2.IMREAD_COLOR if _IMREAD_RGB is None else _IMREAD_RGB)
     except cv2.error:
         return None
-    if bgr is None or bgr.ndim != 3 or bgr.shape[2] != 3:
+    if img is None or img.ndim != 3 or img.shape[2] != 3:
         return None
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB) if _IMREAD_RGB is None else img
 
 
 @dataclass

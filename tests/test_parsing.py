@@ -223,6 +223,16 @@ def test_decode_image_returns_rgb():
     assert rgb.shape == (160, 320, 3) and rgb[0, 0, 0] == 255 and rgb[0, 0, 2] == 0
 
 
+def test_decoded_frames_equal_bgr_decode_plus_colour_conversion(test_dataset_dir):
+    """Decoding straight to RGB (one pass less) gives exactly the pixels of BGR decode + cvtColor."""
+    paths = sorted((test_dataset_dir / "IMG").glob("*.jpg"))[::10]
+    assert paths
+    for path in paths:
+        raw = path.read_bytes()
+        ref = cv2.cvtColor(cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        assert np.array_equal(sf.decode_image(_b64(raw)), ref)
+
+
 @pytest.mark.parametrize("b64", [None, "", "%%%", _b64(b"hello"), 7])
 def test_decode_image_garbage_is_none(b64):
     assert sf.decode_image(b64) is None
