@@ -87,14 +87,16 @@ class StuckMeter:
         self._run_s = 0.0
         self._run_start = None
         self._hist = deque()  # (t, x, y, picking)
+        self._picking = 0  # entries of _hist with picking set (kept as they come and go: no scan per frame)
 
     def update(self, t, dt, x, y, v, throttle, picking):
         self._hist.append((t, x, y, picking))
+        self._picking += bool(picking)
         while self._hist and self._hist[0][0] < t - PROGRESS_WINDOW_S:
-            self._hist.popleft()
+            self._picking -= bool(self._hist.popleft()[3])
         slow = abs(throttle) > STUCK_THROTTLE and abs(v) < STUCK_SPEED
         no_progress = False
-        if t >= PROGRESS_WINDOW_S and not any(h[3] for h in self._hist):
+        if t >= PROGRESS_WINDOW_S and not self._picking:
             x0, y0 = self._hist[0][1], self._hist[0][2]
             no_progress = math.hypot(x - x0, y - y0) < PROGRESS_MIN_M
         if (slow or no_progress) and not picking:

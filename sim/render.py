@@ -835,6 +835,8 @@ class Renderer:
         self._tread = None  # tyre-track tread mask, loaded with the first tracks drawn
         self._track_rgb = None  # lit colour of a track texel on level floor, 0..255 RGB
         self._sample_ground = {}  # (x, y) of a sample spot -> terrain height there, m
+        self._params_for = None  # the samples argument _params was built from (as a tuple of tuples)
+        self._params = np.zeros((0, 8))  # their _sample_params rows
         az, el = math.radians(SUN_AZIMUTH_DEG), math.radians(SUN_ELEVATION_DEG)
         self._sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
 
@@ -920,7 +922,15 @@ class Renderer:
                                  params, self._sun, SAMPLE_MIN_SHADE, FAR_M, FOCAL_PX, CX, CY)
 
     def _sample_params(self, samples) -> np.ndarray:
-        """(N, 8) float64 per finite sample: centre xyz, half width, half height, cos/sin yaw, scale."""
+        """(N, 8) float64 per finite sample: centre xyz, half width, half height, cos/sin yaw, scale.
+        Samples rarely change between frames: the rows of the last call are reused when they have not."""
+        key = tuple(tuple(sample) for sample in samples)
+        if key != self._params_for:
+            self._params = self._build_sample_params(key)
+            self._params_for = key
+        return self._params
+
+    def _build_sample_params(self, samples) -> np.ndarray:
         rows = []
         for sample in samples:
             sx, sy, scale, syaw = (float(v) for v in sample)
