@@ -313,12 +313,11 @@ def _darkening_lut(cast_shadows: bool = True) -> np.ndarray:
     return (1.0 - DIST_DARKEN * (1.0 - np.exp(-dist / DIST_SCALE_M))).astype(np.float64)
 
 
-def _far_tint(ray_a, ray_b):
-    """(tint table, per-pixel |ray| for a unit forward component) for the shadowless far-floor colour."""
-    from sim.shading import far_tint_lut
+def _splat_mip(world: World):
+    """(sand weight mipmaps, texel size m) for the shadowless far-floor look (sim/shading.py)."""
+    from sim.shading import splat_pyramid
 
-    aa, bb = np.meshgrid(ray_a, ray_b)
-    return far_tint_lut(), np.sqrt(1.0 + aa * aa + bb * bb).astype(np.float64)
+    return splat_pyramid(world.sand_weight), float(world.sand_cell_m)
 
 
 # ---------------------------------------------------------------------- marching
@@ -826,7 +825,8 @@ class Renderer:
         self.sky_rgb = np.array(SKY_RGB, np.uint8)
         self.far_rgb = np.array(FAR_RGB, np.uint8)
         self._dark_lut = _darkening_lut(bool(world.cast_shadows))
-        self._far_tint = None if world.cast_shadows else _far_tint(self.ray_a, self.ray_b)  # (lut, ray norms)
+        self._splat_mip = None if world.cast_shadows else _splat_mip(world)  # (weight mipmaps, texel m)
+        self.backscatter = True  # the floor's bright lobe away from the sun (sim/shading.py); False: plain Lambert
         self.column_share_m = COLUMN_SHARE_MAX_M  # 0: every column marched (the reference image)
         self._col_order, self._col_offset = column_plan(IMAGE_W, COLUMN_SHARE_TIERS)
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
@@ -872,10 +872,21 @@ class Renderer:
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
                        COLUMN_SHARE_LEVELS, self._col_order, self._col_offset)
-        if self._far_tint is not None:
-            from sim.shading import DARK_TINT_STEP_M, apply_far_tint
+        if self._splat_mip is not None:
+            from sim import shading
 
-            apply_far_tint(img, depth, self._far_tint[1], self._far_tint[0], DARK_TINT_STEP_M)
+            shading.apply_splat_mip(img, depth, origin, np.ascontiguousarray(rot), self.ray_a, self.ray_b,
+                                    self._splat_mip[0], self._splat_mip[1], FOCAL_PX, terrain,
+                                    1.0 / float(self.world.terrain_cell_m), np.array(SAND_LUT_RGB[-1], np.float64),
+                                    np.array(shading.ROCK_LAYER_RGB, np.float64), shading.SPLAT_LOD_BIAS,
+                                    shading.SPLAT_LOD_MAX, shading.SPLAT_MIN_SIN, shading.ROCK_HIT_ABOVE_GROUND_M)
+        if self.backscatter:
+            from sim import shading
+
+            rot_c = np.ascontiguousarray(rot)
+            shading.apply_backscatter(img, depth, origin, rot_c, self.ray_a, self.ray_b,
+                                      shading.backscatter_columns(rot_c, self.ray_a, SUN_AZIMUTH_DEG), terrain,
+                                      1.0 / float(self.world.terrain_cell_m), shading.ROCK_HIT_ABOVE_GROUND_M)
         if tracks is not None:
             self.draw_tracks(img, depth, origin, rot, tracks)
         self.draw_samples(img, depth, origin, rot, samples)

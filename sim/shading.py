@@ -2,17 +2,30 @@
 when the world's cast_shadows is off (the simulator's quality levels without realtime shadows).
 
 Measured on floor pixels (sand weight > 0.9) of the real frames against twin frames at the same
-poses. Fitted on megalphian alone, checked on royalejandro and dimaga (held out); test_dataset was
+poses. Fitted on megalphian and dimaga, checked on royalejandro (held out); test_dataset was
 recorded at a quality level with cast shadows and keeps the `--shadows on` look.
 
-1. Far-floor darkening (`shadowless_darkening`, `apply_far_tint`). The floor keeps its brightness out
-   to about 5 m and then darkens quickly with viewing distance: at 10 m it is at 0.75 of the near
-   floor's brightness, at 25 m at 0.55, and turns a little redder (green/red falls from 0.91 to
-   0.86, so the client no longer takes it for shadowed sand). test_dataset darkens much less (0.80 at
-   10 m), which the old exponential curve in sim/render.py fits. The raymarch applies the green
-   curve as its scalar distance table; `apply_far_tint` then scales red and blue by their curve over
-   green.
-2. The floor the walls hide from the sun is darker even without cast shadows, though far less than
+1. Far floor: the terrain's splat map seen through its mipmaps (`splat_pyramid`, `apply_splat_mip`).
+   The terrain blends its sand layer and six dark rock layers by a 512 x 512 weight texture (0.39 m
+   texels). The GPU samples that texture at the mip level of each pixel's footprint, and at grazing
+   view a pixel's footprint along the ray grows with the square of the distance (4 m at 10 m), so far
+   floor is drawn with a weight averaged over metres of floor: dark wherever a wall foot lies
+   within that reach, bright only in the middle of wide floor. With no fitted parameter beyond the
+   rock layers' colour and a mip cap, this predicts the far floor's brightness per distance band
+   (0.98 at 6.5 m, 0.90 at 9 m, 0.81 at 11.5 m, 0.67 at 15 m, 0.58 at 24 m of the near floor; real:
+   0.93, 0.88, 0.77, 0.64, 0.56 on megalphian) and, pixel by pixel, correlates 0.5-0.7 with the real
+   frames' far-floor brightness, which a distance curve cannot (0: it is one value per distance).
+   The far floor also turns redder because the rock layers are (green / red 0.68 against 0.91).
+   An earlier distance curve (knee 5.2 m, e-folding 8.65 m) fitted the medians but drew all far
+   floor alike, so the whole-view masks missed the bright far floor of open stretches.
+2. Back-scatter: floor seen with the sun behind the camera is brighter, in a lobe of view azimuth
+   (`apply_backscatter`). Real over twin floor brightness by the pixel's view azimuth minus the azimuth
+   opposite the sun, 10-degree bins from -60 to +60: 0.97 0.98 1.00 1.03 1.08 1.17 1.20 1.14 1.06 1.00
+   0.98 0.97 on megalphian, the same within 0.02 on royalejandro, dimaga and test_dataset (1.24 at
+   the peak); flat by the rover's heading, so it belongs to the view ray, not to the drive. It shows as
+   the bright streak the real frames have toward 115-120 degrees. The cause in the simulator's
+   shader is not known; the lobe is applied at both quality levels.
+3. The floor the walls hide from the sun is darker even without cast shadows, though far less than
    in cast shadow (`SHADOWLESS_SHADOW_FACTOR`). Within 5 m of the camera, on the floor the twin's
    shadow raster marks as shadowed, the real floor is 14 (megalphian), 12-30 (dimaga) and 34
    (royalejandro) grey levels darker than the twin without shadows, beyond the 5-14 of the sunlit
@@ -22,58 +35,158 @@ recorded at a quality level with cast shadows and keeps the `--shadows on` look.
 """
 from __future__ import annotations
 
+import math
+
+import cv2
 import numpy as np
 from numba import njit
 
-SHADOWLESS_KNEE_M = 5.2  # beyond this viewing distance the floor darkens, m
-SHADOWLESS_SCALE_M = 8.65  # e-folding distance of the darkening beyond the knee, m
-SHADOWLESS_FAR_RGB = (0.506, 0.474, 0.467)  # brightness the far floor tends to per channel (a little redder), 0..1
-SHADOWLESS_SCALAR_CHANNEL = 1  # the distance table the raymarch applies is this channel's curve (green)
-SHADOWLESS_NEAR_SHARE = 0.5  # share of the other quality levels' near-floor darkening kept within the knee, 0..1
+SHADOWLESS_KNEE_M = 5.2  # the near floor's mild darkening stops growing here, m
+SHADOWLESS_NEAR_SHARE = 0.5  # share of the other quality levels' near-floor darkening kept, 0..1
 SHADOWLESS_SHADOW_FACTOR = 0.9  # brightness of the floor hidden from the sun without cast shadows, 0..1
-DARK_TINT_STEP_M = 0.05  # distance resolution of the far tint table, m
-DARK_TINT_MAX_M = 200.0  # the table's reach (farther hits use its last entry), m
+ROCK_LAYER_RGB = (78.0, 53.0, 45.0)  # mean colour of the terrain's six rock layers on lit level ground, 0..255
+SPLAT_LOD_MAX = 5.0  # coarsest mip level the far floor is drawn with (5: 12.5 m texels), levels
+SPLAT_LOD_BIAS = 0.0  # added to each pixel's mip level (0: the footprint's long axis, isotropic filtering), levels
+SPLAT_MIN_SIN = 0.005  # grazing-angle sine below which the footprint is taken as at this sine, 0..1
+BACKSCATTER_GAIN = 0.25  # extra brightness of the floor seen straight away from the sun, fraction
+BACKSCATTER_OFFSET_DEG = 3.0  # the bright lobe's centre, degrees counter-clockwise of the sun's opposite azimuth
+BACKSCATTER_SIGMA_DEG = 13.6  # the lobe's width (Gaussian sigma) in view azimuth, degrees
+MIN_FOOT_HEIGHT_M = 0.2  # pixels nearer than sqrt(texel x focal x this) skip the mip pass (level floor, camera 0.21 m up), m
+ROCK_HIT_ABOVE_GROUND_M = 0.05  # a hit this far above the terrain is a rock mesh, drawn without the splat map, m
 
 
-def shadowless_darkening(dist_m, channel: int = SHADOWLESS_SCALAR_CHANNEL) -> np.ndarray:
-    """Brightness factor of one colour channel by viewing distance at the simulator's shadowless quality levels:
-    the near floor as at the other quality levels (the colour table was fitted with that curve), then the
-    knee's darkening on top."""
+def shadowless_darkening(dist_m) -> np.ndarray:
+    """Brightness factor by viewing distance at the simulator's shadowless quality levels: a share of
+    the other quality levels' near-floor darkening (the colour table was fitted with that curve),
+    held from the knee on; the far floor's darkening comes from the splat mipmaps (`apply_splat_mip`)."""
     from sim.render import DIST_DARKEN, DIST_SCALE_M
 
     dist = np.asarray(dist_m, np.float64)
-    near = 1.0 - SHADOWLESS_NEAR_SHARE * DIST_DARKEN * (1.0 - np.exp(-np.minimum(dist, SHADOWLESS_KNEE_M) / DIST_SCALE_M))
-    beyond = np.maximum(dist - SHADOWLESS_KNEE_M, 0.0)
-    far = SHADOWLESS_FAR_RGB[channel]
-    return near * (far + (1.0 - far) * np.exp(-beyond / SHADOWLESS_SCALE_M))
+    return 1.0 - SHADOWLESS_NEAR_SHARE * DIST_DARKEN * (1.0 - np.exp(-np.minimum(dist, SHADOWLESS_KNEE_M) / DIST_SCALE_M))
 
 
-def far_tint_lut() -> np.ndarray:
-    """float32 (n, 3): per channel, its darkening over the scalar channel's, one row per DARK_TINT_STEP_M."""
-    dist = np.arange(int(DARK_TINT_MAX_M / DARK_TINT_STEP_M) + 1) * DARK_TINT_STEP_M
-    scalar = shadowless_darkening(dist)
-    return np.stack([shadowless_darkening(dist, ch) / scalar for ch in range(3)], -1).astype(np.float32)
+def splat_pyramid(sand_weight: np.ndarray) -> np.ndarray:
+    """float32 (levels, n, n): the sand weight texture and its 2x2-averaged mipmaps, level k in [:n >> k, :n >> k]."""
+    level = np.ascontiguousarray(sand_weight, np.float32)
+    n = level.shape[0]
+    levels = int(math.ceil(SPLAT_LOD_MAX)) + 1
+    out = np.zeros((levels + 1, n, n), np.float32)
+    for k in range(levels + 1):
+        out[k, : level.shape[0], : level.shape[1]] = level
+        if level.shape[0] > 1:
+            level = cv2.resize(level, (level.shape[1] // 2, level.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _texel_bilinear(pyr, k, texel_m, x, y):
+    n = pyr.shape[1] >> k
+    t = texel_m * (1 << k)
+    fx = min(max(x / t - 0.5, 0.0), n - 1.0001)
+    fy = min(max(y / t - 0.5, 0.0), n - 1.0001)
+    c, r = int(fx), int(fy)
+    ax, ay = fx - c, fy - r
+    return ((pyr[k, r, c] * (1.0 - ax) + pyr[k, r, c + 1] * ax) * (1.0 - ay)
+            + (pyr[k, r + 1, c] * (1.0 - ax) + pyr[k, r + 1, c + 1] * ax) * ay)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _terrain_bilinear(terrain, inv_cell, x, y):
+    n = terrain.shape[0]
+    fx = min(max(x * inv_cell, 0.0), n - 1.0001)
+    fy = min(max(y * inv_cell, 0.0), n - 1.0001)
+    c, r = int(fx), int(fy)
+    ax, ay = fx - c, fy - r
+    return ((terrain[r, c] * (1.0 - ax) + terrain[r, c + 1] * ax) * (1.0 - ay)
+            + (terrain[r + 1, c] * (1.0 - ax) + terrain[r + 1, c + 1] * ax) * ay)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _terrain_with_slope(terrain, inv_cell, x, y):
+    """(height, dh/dx, dh/dy) of the bilinear terrain at (x, y), from one cell's four vertices."""
+    n = terrain.shape[0]
+    fx = min(max(x * inv_cell, 0.0), n - 1.0001)
+    fy = min(max(y * inv_cell, 0.0), n - 1.0001)
+    c, r = int(fx), int(fy)
+    ax, ay = fx - c, fy - r
+    t00, t01, t10, t11 = terrain[r, c], terrain[r, c + 1], terrain[r + 1, c], terrain[r + 1, c + 1]
+    h = (t00 * (1.0 - ax) + t01 * ax) * (1.0 - ay) + (t10 * (1.0 - ax) + t11 * ax) * ay
+    gx = ((t01 - t00) * (1.0 - ay) + (t11 - t10) * ay) * inv_cell
+    gy = ((t10 - t00) * (1.0 - ax) + (t11 - t01) * ax) * inv_cell
+    return h, gx, gy
 
 
 @njit(cache=True, nogil=True)
-def apply_far_tint(img, depth, ray_norm, lut, step):
-    """Scale each channel of the pixels beyond the knee by the tint table, in place.
+def apply_splat_mip(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_px, terrain, inv_tcell,
+                    sand_rgb, rock_rgb, lod_bias, lod_max, min_sin, rock_above_m):
+    """Recolour each terrain pixel by the splat weight at its mip level over the weight at full resolution, in place.
 
-    depth: the raymarch's depth along the forward axis (inf for sky); ray_norm: |ray| per pixel for a
-    unit forward component, so depth * ray_norm is the viewing distance the table is indexed by."""
+    depth: the raymarch's depth along the forward axis (inf for sky); a pixel's footprint along the floor is
+    its viewing distance / (focal length x sine of the grazing angle against the terrain's normal)."""
     h, w = depth.shape
-    n = lut.shape[0]
-    first = int(SHADOWLESS_KNEE_M / step)
+    min_foot = texel_m  # footprints under one texel use the full-resolution texture: nothing to do
     for v in range(h):
         for u in range(w):
             d = depth[v, u]
             if not d < 1e30:
                 continue
-            i = int(d * ray_norm[v, u] / step)
-            if i <= first:
+            dx = rot[0, 0] * ray_a[u] + rot[0, 1] * ray_b[v] + rot[0, 2]
+            dy = rot[1, 0] * ray_a[u] + rot[1, 1] * ray_b[v] + rot[1, 2]
+            dz = rot[2, 0] * ray_a[u] + rot[2, 1] * ray_b[v] + rot[2, 2]
+            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+            dist = d * norm
+            if dist * dist < min_foot * focal_px * MIN_FOOT_HEIGHT_M:  # nearer level floor shows full-resolution texels
                 continue
-            if i >= n:
-                i = n - 1
+            x, y, z = origin[0] + d * dx, origin[1] + d * dy, origin[2] + d * dz
+            ground, gx, gy = _terrain_with_slope(terrain, inv_tcell, x, y)
+            if z > ground + rock_above_m:
+                continue
+            sin_g = abs(-gx * dx - gy * dy + dz) / (norm * math.sqrt(gx * gx + gy * gy + 1.0))
+            foot = dist / (focal_px * max(sin_g, min_sin))
+            if foot <= min_foot:
+                continue
+            lod = min(math.log2(foot / texel_m) + lod_bias, lod_max)
+            if lod <= 0.0:
+                continue
+            k = int(lod)
+            f = lod - k
+            blur = _texel_bilinear(pyr, k, texel_m, x, y)
+            if f > 0.0:
+                blur = blur * (1.0 - f) + _texel_bilinear(pyr, k + 1, texel_m, x, y) * f
+            sharp = _texel_bilinear(pyr, 0, texel_m, x, y)
             for ch in range(3):
-                if ch != SHADOWLESS_SCALAR_CHANNEL:
-                    img[v, u, ch] = np.uint8(min(img[v, u, ch] * lut[i, ch] + 0.5, 255.0))
+                s, r = sand_rgb[ch], rock_rgb[ch]
+                factor = (blur * s + (1.0 - blur) * r) / (sharp * s + (1.0 - sharp) * r)
+                img[v, u, ch] = np.uint8(min(img[v, u, ch] * factor + 0.5, 255.0))
+
+
+def backscatter_columns(rot, ray_a, sun_azimuth_deg: float) -> np.ndarray:
+    """Per image column, the back-scatter brightness factor (1 outside the lobe), from the column's view azimuth.
+
+    The azimuth is taken at the image's middle row: the rover's pitch and roll move it by well under a
+    degree across the rows that show the floor."""
+    dirs = rot[:, 0][None, :] * np.asarray(ray_a)[:, None] + rot[:, 2][None, :]
+    az = np.degrees(np.arctan2(dirs[:, 1], dirs[:, 0]))
+    rel = (az - (sun_azimuth_deg + 180.0 + BACKSCATTER_OFFSET_DEG) + 180.0) % 360.0 - 180.0
+    return 1.0 + BACKSCATTER_GAIN * np.exp(-0.5 * (rel / BACKSCATTER_SIGMA_DEG) ** 2)
+
+
+@njit(cache=True, nogil=True)
+def apply_backscatter(img, depth, origin, rot, ray_a, ray_b, column_gain, terrain, inv_tcell, rock_above_m):
+    """Brighten the terrain pixels of the columns inside the back-scatter lobe, in place (rock meshes and sky untouched)."""
+    h, w = depth.shape
+    for u in range(w):
+        g = column_gain[u]
+        if g < 1.002:
+            continue
+        for v in range(h):
+            d = depth[v, u]
+            if not d < 1e30:
+                continue
+            x = origin[0] + d * (rot[0, 0] * ray_a[u] + rot[0, 1] * ray_b[v] + rot[0, 2])
+            y = origin[1] + d * (rot[1, 0] * ray_a[u] + rot[1, 1] * ray_b[v] + rot[1, 2])
+            z = origin[2] + d * (rot[2, 0] * ray_a[u] + rot[2, 1] * ray_b[v] + rot[2, 2])
+            if z > _terrain_bilinear(terrain, inv_tcell, x, y) + rock_above_m:
+                continue
+            for ch in range(3):
+                img[v, u, ch] = np.uint8(min(img[v, u, ch] * g + 0.5, 255.0))

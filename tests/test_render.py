@@ -235,6 +235,8 @@ def test_fast_kernel_draws_the_same_frames_as_the_reference_kernel(canyon_render
     old = RendererV1(w)
     canyon_renderer = Renderer(w)  # shares the baked rasters
     canyon_renderer._dark_lut = _darkening_lut(True)  # the reference has only the cast-shadow distance darkening
+    canyon_renderer._splat_mip = None  # ... and none of the look terms drawn after the march (sim/shading.py)
+    canyon_renderer.backscatter = False
     rng = np.random.default_rng(7)
     rows, cols = np.nonzero(w.nav_truth)
     spots = w.sample_spots[:6]
@@ -267,7 +269,9 @@ def test_odd_columns_sharing_their_neighbours_hits_draw_nearly_the_marched_frame
         shared_img = canyon_renderer.render(pose)
         marched_img = marched.render(pose)
         diff = np.abs(shared_img.astype(int) - marched_img.astype(int)).max(axis=2)
-        assert (diff <= 8).mean() >= 0.99, pose
+        # 0.985-0.998 of pixels within 8 levels: the shadowless look no longer darkens far walls by distance
+        # (sim/shading.py), so their texture contrast, which sharing averages, is up to 1.8 times larger
+        assert (diff <= 8).mean() >= 0.98, pose
         assert (_navigable(shared_img) == _navigable(marched_img)).mean() >= 0.998, pose
         same_sky = np.isfinite(canyon_renderer.last_depth) == np.isfinite(marched.last_depth)
         assert same_sky.mean() >= 0.999, pose

@@ -1,39 +1,88 @@
-"""Look terms for the real drives recorded without cast shadows (sim/shading.py)."""
+"""Look terms for the real drives (sim/shading.py): splat mipmaps on the far floor, the back-scatter lobe."""
 import numpy as np
+import pytest
 
 from sim import shading
-from sim.render import Renderer, _darkening_lut
+from sim.render import SUN_AZIMUTH_DEG, Renderer, _darkening_lut
 from sim.world import with_shadows
 from test_render import _flat_world
 
 
-def test_shadowless_floor_keeps_its_brightness_near_and_darkens_far():
-    d = np.array([0.0, 2.0, 5.0, 10.0, 25.0, 60.0])
+def test_near_floor_darkening_stops_at_the_knee():
+    d = np.array([0.0, 2.0, shading.SHADOWLESS_KNEE_M, 10.0, 60.0])
     f = shading.shadowless_darkening(d)
-    assert f[0] == 1.0 and f[2] > 0.93  # the near floor loses at most a few per cent (as measured: 0.95)
-    assert f[3] < f[2] - 0.15 and 0.6 < f[3] < 0.85 and f[4] < 0.6  # beyond the 5.2 m knee it falls fast
-    assert np.all(np.diff(f) <= 0)
-    assert 0.9 * min(shading.SHADOWLESS_FAR_RGB) <= f[-1] < max(shading.SHADOWLESS_FAR_RGB)
-    # far away the floor turns redder: green / red falls (the client's shadowed-sand rule needs >= 0.9)
-    red, green = shading.shadowless_darkening(d, 0), shading.shadowless_darkening(d, 1)
-    assert np.allclose(red[:3], green[:3]) and green[-1] / red[-1] < 0.95
-    tint = shading.far_tint_lut()
-    assert np.allclose(tint[:, 1], 1.0) and tint[-1, 0] > 1.0 > tint[-1, 2]
-    # the quality level with cast shadows (test_dataset) darkens much less far away
-    lit, shadowless = _darkening_lut(True), _darkening_lut(False)
-    assert shadowless[-1] < lit[-1] - 0.2
+    assert f[0] == 1.0 and np.all(np.diff(f) <= 0)
+    assert f[2] > 0.93 and f[3] == f[2] == f[4]  # the near floor loses a few per cent (measured 0.95), then holds
+    lut = _darkening_lut(False)
+    assert lut[-1] == pytest.approx(f[-1]) and lut[-1] > _darkening_lut(True)[-1]  # the far darkening is the mipmaps'
 
 
-def test_twin_without_shadows_renders_the_far_floor_darker_not_the_near_floor():
-    """On level sand the rows near the horizon (floor > 10 m away) fail the starter threshold without
-    shadows (as on megalphian / royalejandro), while the floor within the knee keeps nearly its colour."""
+def test_splat_pyramid_levels_are_two_by_two_means():
+    rng = np.random.default_rng(0)
+    w = rng.uniform(0, 1, (64, 64)).astype(np.float32)
+    pyr = shading.splat_pyramid(w)
+    assert pyr.shape[0] >= int(np.ceil(shading.SPLAT_LOD_MAX)) + 1
+    assert np.array_equal(pyr[0], w)
+    assert np.allclose(pyr[1, :32, :32], w.reshape(32, 2, 32, 2).mean(axis=(1, 3)), atol=1e-6)
+    assert pyr[3, :8, :8].mean() == pytest.approx(w.mean(), abs=1e-5)
+
+
+def _walled_world():
+    """Level sand with a strip of rock-layer texture (weight 0, no relief) along x >= 120 m."""
     world = _flat_world()
-    pose = (100.0, 100.0, 0.0, 0.0, 0.0)
-    off = Renderer(with_shadows(world, False)).render(pose)
-    on = Renderer(with_shadows(world, True)).render(pose)
-    assert np.all(np.abs(off[100:].astype(int) - on[100:]) <= 8)  # floor within 4 m: nearly as lit
-    far_rows = slice(80, 82)  # just under the horizon: floor more than 10 m away
-    assert np.all(on[far_rows] > 160)
-    assert not np.all(off[far_rows] > 160, axis=2).any()
-    g_per_r = off[far_rows, :, 1].astype(float) / off[far_rows, :, 0]
-    assert np.all(g_per_r < on[far_rows, :, 1].astype(float) / on[far_rows, :, 0])
+    sand = world.sand_weight.copy()
+    sand[:, int(120 / world.sand_cell_m):] = 0.0
+    from dataclasses import replace
+
+    return replace(world, sand_weight=sand)
+
+
+def test_far_floor_beside_rock_texture_darkens_but_open_floor_far_away_does_not():
+    """The mipmapped splat weight: floor 1 m from the dark strip is drawn darker seen from 12 m than from
+    2 m, while open floor far from any strip keeps its colour at the same distance."""
+    world = with_shadows(_walled_world(), False)
+    r = Renderer(world)
+    r.backscatter = False
+
+    def farthest_floor_before(x_from, x_max):
+        """(hit x, colour) of the centre column's pixel that hits the floor nearest short of x_max."""
+        img = r.render((x_from, 100.0, 0.0, 0.0, 0.0))
+        xs = r.last_hit[:, 160, 0]
+        rows = np.flatnonzero(np.isfinite(xs) & (xs < x_max))
+        v = rows[np.argmax(xs[rows])]
+        return float(xs[v]), img[v, 160].astype(float)
+
+    def seen_from_close(x):
+        img = r.render((x - 2.0, 100.0, 0.0, 0.0, 0.0))
+        xs = np.nan_to_num(r.last_hit[:, 160, 0], nan=-1e9)
+        return img[np.argmin(np.abs(xs - x)), 160].astype(float)
+
+    # a rover position from which a centre pixel sees floor 0.5-2 m short of the strip, at least 9 m ahead
+    x, far = next(hit for hit in (farthest_floor_before(x0, 119.9) for x0 in np.arange(103.0, 109.0, 0.25))
+                  if hit[0] > 118.0)
+    assert x < 119.9
+    near = seen_from_close(x)
+    assert far.min() < near.min() - 30  # the far view averages the dark strip in
+    assert far[1] / far[0] < near[1] / near[0]  # and turns redder, as the rock layers are
+    x, open_far = farthest_floor_before(30.0, 43.0)  # open floor, the strip 77 m away
+    # nothing dark within reach: only the few per cent of near-floor darkening held from the knee on
+    assert np.all(open_far >= 0.93 * seen_from_close(x))
+
+
+def test_backscatter_brightens_the_floor_seen_away_from_the_sun_only():
+    world = with_shadows(_flat_world(), True)
+    r = Renderer(world)
+    away = SUN_AZIMUTH_DEG + 180.0 + shading.BACKSCATTER_OFFSET_DEG
+    rows = slice(110, 160)  # floor within about 2 m
+
+    def floor(yaw, on):
+        r.backscatter = on
+        return r.render((100.0, 100.0, yaw % 360.0, 0.0, 0.0))[rows, 155:165].astype(float)
+
+    lit = floor(away, False)
+    expected = np.minimum(lit * (1.0 + shading.BACKSCATTER_GAIN), 255.0)  # bright sand saturates
+    assert np.abs(floor(away, True) - expected).max() <= 3.0
+    assert np.abs(floor(away + 90.0, True) - floor(away + 90.0, False)).max() <= 1.0
+    gains = shading.backscatter_columns(r.camera((100.0, 100.0, away, 0.0, 0.0))[1], r.ray_a, SUN_AZIMUTH_DEG)
+    assert gains[155:165].min() > 1.0 + 0.95 * shading.BACKSCATTER_GAIN  # the middle columns look straight away
+    assert gains[0] < 1.01 and gains[-1] < 1.01  # 54 deg to either side: outside the lobe
