@@ -864,5 +864,8 @@ def perception_step(rover):
         if window is not None:
             render_worldmap(mem, mem.drive_worldmap, window, drive=True)
     rover.worldmap = mem.worldmap
-    rover.vision_image = _overlay_u8(img, nav8, rock8, shade8)
+    if hasattr(rover, "defer_vision_image"):  # RoverState: drawn only if someone looks (insets, dashboard)
+        rover.defer_vision_image(lambda: _overlay_u8(img, nav8, rock8, shade8))
+    else:
+        rover.vision_image = _overlay_u8(img, nav8, rock8, shade8)
     return rover

@@ -40,7 +40,8 @@ class RoverState:
         self.obs_dists = np.zeros(0)
         self.rock_angles = np.zeros(0)
         self.rock_dists = np.zeros(0)
-        self.vision_image = np.zeros(IMAGE_SHAPE, dtype=np.uint8)  # shown as inset 2
+        self._vision_image = np.zeros(IMAGE_SHAPE, dtype=np.uint8)
+        self._vision_draw = None  # perception's pending drawing of it (see vision_image)
         self.worldmap = np.zeros((WORLD_SIZE, WORLD_SIZE, 3), dtype=np.uint8)  # [y, x]: R obstacle, G rock, B navigable
         self.rocks_world = []  # remembered sample-rock world positions [(x, y), ...]
         self.map_updated = False  # this frame passed the tilt gate and updated the map
@@ -58,3 +59,24 @@ class RoverState:
 
         # --- scoring / display ---------------------------------------------
         self.ground_truth = ground_truth  # 200x200 uint8 map_bw (255 navigable) or None
+
+    # --- the vision image, drawn only when someone looks -------------------
+    @property
+    def vision_image(self):
+        """Camera view with the thresholds colour-coded, RGB uint8 160x320x3 (shown as inset 2).
+
+        Perception hands over a drawing function instead of the image (defer_vision_image): missions
+        on the twin run without insets, and drawing it every frame was ~5 % of the client's time."""
+        if self._vision_draw is not None:
+            self._vision_image = self._vision_draw()
+            self._vision_draw = None
+        return self._vision_image
+
+    @vision_image.setter
+    def vision_image(self, image):
+        self._vision_image = image
+        self._vision_draw = None
+
+    def defer_vision_image(self, draw):
+        """Set vision_image to ``draw()``, called when (and if) vision_image is next read."""
+        self._vision_draw = draw

@@ -132,3 +132,18 @@ def test_pixel_labels_follow_changed_thresholds(monkeypatch):
     assert not P._pixel_labels(img)[1].any()
     monkeypatch.setattr(P, "NAV_RGB_MIN", (140, 140, 140))
     assert P._pixel_labels(img)[1].all()
+
+
+def test_vision_image_is_drawn_on_first_read_and_equals_the_overlay():
+    img = np.full((160, 320, 3), 40, np.uint8)
+    img[90:] = (210, 190, 175)
+    img[120:126, 150:156] = (220, 190, 10)
+    r = RoverState()
+    r.img, r.pos, r.yaw = img, (100.0, 100.0), 0.0
+    P.perception_step(r)
+    assert r._vision_draw is not None  # nothing drawn yet
+    _labels, nav8, rock8, shade8 = P._pixel_labels(img)
+    assert np.array_equal(r.vision_image, P._overlay_u8(img, nav8, rock8, shade8))
+    P.perception_step(r)
+    r.vision_image = np.zeros((160, 320, 3), np.uint8)  # an explicit image replaces the pending drawing
+    assert not r.vision_image.any()
