@@ -55,6 +55,8 @@ TURN_IN_PLACE_SPEED_MPS = 0.3  # the simulator turns in place only below 0.316 m
 # --- heading / turning ----------------------------------------------------------------
 ROTATE_ENTER_DEG = 90.0  # a wanted heading further off than this is reached by turning in place, degrees
 LEAVE_PICKUP_ROTATE_DEG = 30.0  # leaving a pickup spot (samples lie at wall feet), turn in place first when the way on is further off than this, degrees
+SWEEP_REASONS = ("path-behind", "leave-pickup")  # long turns in place that may go the long way round to sweep the camera over unsearched wall feet (explore.sweep_direction)
+SWEEP_COMMIT_DEG = 90.0  # ...the long way is kept while the heading error, on the far side, is larger than this, degrees
 ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
 SPIN_WINDOW_S = 20.0  # window for detecting endless turning in place, s
 SPIN_STOP_FRACTION = 0.6  # ...share of it spent turning in place
@@ -171,6 +173,8 @@ class NavMemory:
         self.spin_hist = deque()  # (t, turning in place?, x, y) over SPIN_WINDOW_S
         self.spin_events = []  # (t, x, y) of every spin detection, for alternating the escape
         self.turn_ref = None  # (t, yaw) since when turning in place has not changed the heading
+        self.rotate_dir = None  # +1 / -1: this turn goes the long way round (sweeping unsearched wall feet); None: the short way
+        self.unsearched = None  # unsearched wall feet (explore.unsearched_wall_feet) at the last plan with samples missing, or None
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
         # planning
         self.path_xy = np.zeros((0, 2))
@@ -582,6 +586,10 @@ def mode_stop(nav, s):
     The error is judged where the heading will be when this command acts (latency lead).
     """
     err = predict.heading_error_at_lead(nav.rotate_heading, s.yaw, nav.lead.yaw_rate_dps, nav.lead.lead_s)
+    if nav.rotate_dir is not None and err * nav.rotate_dir < 0 and abs(err) > SWEEP_COMMIT_DEG:
+        if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
+            return Command(0.0, BRAKE_STOP, 0.0)
+        return Command(0.0, 0.0, nav.rotate_dir * STEER_LIMIT_DEG)  # the long way round, until past the far side
     if abs(err) <= ROTATE_EXIT_DEG or s.t - nav.rotate_since > ROTATE_TIMEOUT_S:
         nav.rotate_heading = None
         return None
@@ -795,6 +803,14 @@ def _speed_control(vel, target):
 def _start_rotation(nav, s, heading_deg, reason):
     nav.rotate_heading = float(heading_deg) % 360.0
     nav.rotate_since = s.t
+    nav.rotate_dir = None
+    missing = s.samples_remaining is None or s.samples_remaining > 0
+    if reason in SWEEP_REASONS and missing and nav.unsearched is not None:
+        way = explore.sweep_direction(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
+        if way * predict.wrap_deg(nav.rotate_heading - s.yaw) < 0:
+            nav.rotate_dir = way
+            log.info("turning the long way round (%+d) at (%.1f, %.1f) t=%.1f: unsearched wall feet on that side",
+                     way, s.pos[0], s.pos[1], s.t)
     log.debug("turn in place to %.0f deg (%s) at t=%.1f", nav.rotate_heading, reason, s.t)
 
 
@@ -966,6 +982,7 @@ def _cost_grids(rover, nav, s, free, obstacle, allow_unknown):
 def _plan_explore(rover, nav, s):
     """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
     free, obstacle, unknown = _grids(rover)
+    _remember_unsearched(rover, nav, s, free, obstacle)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, nav.seen_close)
     targets, cost, parent, dist = [], None, None, None
     for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
@@ -999,12 +1016,15 @@ def _plan_search(rover, nav, s, frame_maps=None):
     cell = grid.world_to_cell(s.pos)
     _open_around_rover(cost, cell)
     dist, parent = astar.distance_field(cost, cell)
-    unsearched = _unsearched_wall_feet(rover, frame_maps, free, obstacle)
+    unsearched = _remember_unsearched(rover, nav, s, free, obstacle, frame_maps)
+    visited = nav.visits.visited()
     chosen = explore.nearer_search_goal(_peek_goal(rover, nav, s, free, dist),
-                                        explore.search_target(free, nav.visits.visited(), nav.search_done, dist),
+                                        explore.search_target(free, visited, nav.search_done, dist, s.pos, s.yaw),
                                         dist,
-                                        explore.nearest_target(explore.look_targets(unsearched, free, nav.visits.visited(),
-                                                                                    nav.search_done, dist)))
+                                        explore.nearest_target(explore.look_targets(unsearched, free, visited,
+                                                                                    nav.search_done, dist),
+                                                               s.pos, s.yaw),
+                                        s.pos, s.yaw)
     kind, goal = chosen if chosen is not None else ("search", None)
     if goal is None:
         nav.search_left = False
@@ -1014,6 +1034,14 @@ def _plan_search(rover, nav, s, frame_maps=None):
     if nav.path_goal != (kind, goal):
         log.info("sample search: %s at %s from (%.1f, %.1f), t=%.1f", kind, goal, s.pos[0], s.pos[1], s.t)
     _set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
+
+
+def _remember_unsearched(rover, nav, s, free, obstacle, frame_maps=None):
+    """Unsearched wall feet now (see _unsearched_wall_feet), kept in nav for the turns in place
+    until the next plan; None is kept once every sample is in."""
+    unsearched = _unsearched_wall_feet(rover, frame_maps, free, obstacle)
+    nav.unsearched = unsearched if s.samples_remaining is None or s.samples_remaining > 0 else None
+    return unsearched
 
 
 def _peek_goal(rover, nav, s, free, dist):

@@ -38,6 +38,11 @@ SEARCH_FACE_RADIUS_M = 5.0  # at a reached search / peek target the rover turns 
 SEARCH_FACE_HALF_FOV_DEG = 30.0  # ...counting those within this half-angle of a heading (inside the camera's ~55 deg), degrees
 SEARCH_FACE_STEP_DEG = 10.0  # candidate headings are tried at this spacing, degrees
 SEARCH_FACE_MIN_CELLS = 2  # fewer unsearched wall-foot cells than this in view are not worth a turn, cells
+SEARCH_HEADING_WEIGHT_M_PER_RAD = 8.0  # sample search: extra cost per radian a goal lies off the heading (keep sweeping one way), m/rad
+SWEEP_RADIUS_M = 8.0  # a long turn in place counts unsearched wall feet this close as swept by the camera (rocks show from ~6-8 m), m
+SWEEP_HALF_FOV_DEG = 40.0  # ...within this half-angle of the heading (perception's look cone), degrees
+SWEEP_MAX_TURN_DEG = 225.0  # the long way round is taken only up to this (ROTATE_TIMEOUT_S at ~45 deg/s is 270), degrees
+SWEEP_MIN_CELLS = 3  # ...and only when it sweeps at least this many unsearched wall-foot cells the short way does not, cells
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
@@ -188,8 +193,9 @@ def peek_targets(free, shadow_floor, looked, done, dist):
     return _first_per_cluster(rows, cols, lab, d, stats, np.lexsort((d, -dep, lab)))  # deepest, then cheapest
 
 
-def search_target(free, visited, done, dist):
-    """Nearest (by path) mapped floor cell far from everywhere the rover has been, or None.
+def search_target(free, visited, done, dist, pos=None, yaw_deg=None):
+    """Nearest (by path, plus the heading term when pos / yaw_deg are given: see search_cost) mapped
+    floor cell far from everywhere the rover has been, or None.
 
     Used when the map is complete but samples are missing: a sample hidden in
     a pocket (behind a rock at an arm's tip) is only seen from close by.
@@ -198,8 +204,26 @@ def search_target(free, visited, done, dist):
     cand = free & (away >= SEARCH_MIN_AWAY_M) & ~done & np.isfinite(dist)
     if not cand.any():
         return None
-    k = int(np.argmin(np.where(cand, dist, np.inf)))
-    return divmod(k, free.shape[1])
+    rows, cols = np.nonzero(cand)
+    k = int(np.argmin(search_cost(rows, cols, dist[rows, cols], pos, yaw_deg)))
+    return int(rows[k]), int(cols[k])
+
+
+def search_cost(rows, cols, path_cost, pos=None, yaw_deg=None):
+    """Cost of sample-search goals at cells (rows, cols): path cost + SEARCH_HEADING_WEIGHT_M_PER_RAD per
+    radian off the heading (just the path cost without pos / yaw_deg).
+
+    Nearest first by path alone zig-zagged: on seed 29 (15 fps) the search walked east along the
+    west arm, turned back 25 m for wall feet it had passed, went to the west tip, then crossed the
+    whole canyon east to where the sixth sample lay (220 s of search). Like exploration, the search
+    now keeps going the way it faces unless going back is much nearer.
+    """
+    cost = np.asarray(path_cost, np.float64)
+    if pos is None or yaw_deg is None or not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
+        return cost
+    ang = np.arctan2(np.asarray(rows) + 0.5 - pos[1], np.asarray(cols) + 0.5 - pos[0]) - np.radians(yaw_deg)
+    off = np.abs((ang + np.pi) % (2 * np.pi) - np.pi)
+    return cost + SEARCH_HEADING_WEIGHT_M_PER_RAD * off
 
 
 def unsearched_wall_feet(free, obstacle, looked):
@@ -273,27 +297,63 @@ def face_heading(unsearched, pos, yaw_deg):
     return float(headings[best])
 
 
-def nearest_target(targets):
-    """(row, col) of the target with the lowest path cost, or None."""
+def sweep_direction(unsearched, pos, yaw_deg, target_deg):
+    """Which way to turn in place from yaw_deg to target_deg: +1 (yaw increasing, left) or -1, so that
+    the camera sweeps over unsearched wall feet on the way.
+
+    The short way is the default. The long way is taken when it is at most SWEEP_MAX_TURN_DEG and
+    its arc alone (not the short arc, nor the start and end views both share) holds at least
+    SWEEP_MIN_CELLS unsearched cells within SWEEP_RADIUS_M, more than the short arc alone. At an
+    arm's tip the rover turns round with samples missing; seed 31 (15 fps) turned 157 deg the short
+    way at the west tip, the sixth sample 6.5 m off on the other side, and found it 630 s later.
+    """
+    err = (float(target_deg) - float(yaw_deg) + 180.0) % 360.0 - 180.0
+    short = 1 if err >= 0 else -1
+    if 360.0 - abs(err) > SWEEP_MAX_TURN_DEG or not (np.isfinite(pos[0]) and np.isfinite(pos[1])):
+        return short
+    r = int(np.ceil(SWEEP_RADIUS_M)) + 1
+    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
+    y0, y1 = max(cy - r, 0), min(cy + r + 1, unsearched.shape[0])
+    x0, x1 = max(cx - r, 0), min(cx + r + 1, unsearched.shape[1])
+    rows, cols = np.nonzero(unsearched[y0:y1, x0:x1])
+    dx, dy = cols + x0 + 0.5 - pos[0], rows + y0 + 0.5 - pos[1]
+    near = np.hypot(dx, dy) <= SWEEP_RADIUS_M
+    # offset of each cell counter-clockwise from the start heading; the left arc spans [0, left]
+    off = (np.degrees(np.arctan2(dy[near], dx[near])) - float(yaw_deg)) % 360.0
+    left = err % 360.0
+    h = SWEEP_HALF_FOV_DEG
+    only_left = int(((off > h) & (off < left - h)).sum())
+    only_right = int(((off > left + h) & (off < 360.0 - h)).sum())
+    long_cells, short_cells = (only_right, only_left) if short > 0 else (only_left, only_right)
+    if long_cells >= SWEEP_MIN_CELLS and long_cells > short_cells:
+        return -short
+    return short
+
+
+def nearest_target(targets, pos=None, yaw_deg=None):
+    """(row, col) of the target with the lowest search_cost (path cost alone without pos / yaw_deg), or None."""
     if len(targets) == 0:
         return None
-    k = int(np.argmin(targets[:, 2]))
+    k = int(np.argmin(search_cost(targets[:, 0], targets[:, 1], targets[:, 2], pos, yaw_deg)))
     return int(targets[k, 0]), int(targets[k, 1])
 
 
-def nearer_search_goal(peek, far, dist, look=None):
+def nearer_search_goal(peek, far, dist, look=None, pos=None, yaw_deg=None):
     """("peek" | "search" | "look", cell) for whichever of the best pocket peek, the best far-floor cell
-    and the best stand beside unsearched wall feet is nearer by path, or None when none exists.
+    and the best stand beside unsearched wall feet is cheapest by search_cost (by path alone without
+    pos / yaw_deg), or None when none exists.
 
     Both are places a small sample may hide; the search visits them nearest first. Peeks used to
     go first wherever they were: on seed 0 the rover stood 4 m from the unsearched tip of the
     north arm (where the sixth sample lay) and drove 180 m to a peek at the south tip first.
     """
-    options = [(float(dist[cell]), kind, cell) for kind, cell in (("peek", peek), ("search", far), ("look", look))
+    options = [(kind, cell) for kind, cell in (("peek", peek), ("search", far), ("look", look))
                if cell is not None and np.isfinite(dist[cell])]
     if not options:
         return None
-    _cost, kind, cell = min(options, key=lambda o: o[0])
+    costs = search_cost([c[0] for _k, c in options], [c[1] for _k, c in options],
+                        [dist[c] for _k, c in options], pos, yaw_deg)
+    kind, cell = options[int(np.argmin(costs))]
     return kind, cell
 
 

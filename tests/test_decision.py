@@ -395,3 +395,32 @@ def test_a_reached_look_goal_turns_to_face_an_unsearched_nook_first():
     r.nav.rotate_heading = None
     decision.mode_search(r, r.nav, s)
     assert r.nav.rotate_heading is None and r.nav.search_done[82, 121]
+
+
+@pytest.mark.parametrize("feet_side, expect_left", [(True, True), (False, False)])
+def test_turning_round_with_a_sample_missing_sweeps_the_camera_over_unsearched_wall_feet(feet_side, expect_left):
+    """A path behind the rover (173 -> 16 deg): with unsearched wall feet at 320 deg, 6.5 m off, the turn
+    goes the long way round (left) past them and still ends at 16 deg within the turn timeout."""
+    pos = (16.7, 98.3)
+    nav = decision.NavMemory()
+    nav.unsearched = np.zeros((200, 200), bool)
+    if feet_side:
+        nav.unsearched[93:96, 20:23] = True  # around (21.7, 94.1)
+    empty = np.zeros(0)
+    yaw, t, faced = 173.0, 10.0, False
+    s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+    decision._start_rotation(nav, s, 16.0, "path-behind")
+    first = None
+    while nav.rotate_heading is not None and t < 10.0 + decision.ROTATE_TIMEOUT_S + 1.0:
+        s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+        cmd = decision.mode_stop(nav, s)
+        if cmd is None:
+            break
+        first = cmd.steer if first is None else first
+        yaw = (yaw + 3.0 * DT * cmd.steer) % 360.0  # 45 deg/s at full lock
+        faced |= abs((yaw - 320.0 + 180.0) % 360.0 - 180.0) < 10.0
+        t += DT
+    assert (first > 0) == expect_left
+    assert faced == expect_left
+    assert abs((yaw - 16.0 + 180.0) % 360.0 - 180.0) <= decision.ROTATE_EXIT_DEG + 3.0
+    assert t - 10.0 < decision.ROTATE_TIMEOUT_S

@@ -378,3 +378,38 @@ def test_the_search_visits_an_unsearched_nook_beside_the_trail():
     looked[:] = True
     assert len(explore.look_targets(explore.unsearched_wall_feet(free, obstacle, looked), free, visited,
                                     np.zeros((200, 200), bool), dist)) == 0, "seen from close: searched"
+
+
+def _feet_at(bearing_deg, dist_m, pos=(16.7, 98.3)):
+    """A 3x3 patch of unsearched wall feet dist_m from pos at world bearing bearing_deg."""
+    feet = np.zeros((200, 200), bool)
+    x = pos[0] + dist_m * math.cos(math.radians(bearing_deg))
+    y = pos[1] + dist_m * math.sin(math.radians(bearing_deg))
+    feet[int(y) - 1:int(y) + 2, int(x) - 1:int(x) + 2] = True
+    return feet
+
+
+def test_a_long_turn_goes_the_way_that_sweeps_unsearched_wall_feet():
+    """Seed 31 at the west tip: turning 173 -> 16 deg the short way (right) never faced the sixth sample
+    6.5 m away at 320 deg; the long way (left, 203 deg) sweeps over it."""
+    pos = (16.7, 98.3)
+    assert explore.sweep_direction(_feet_at(320.0, 6.5), pos, 173.0, 16.0) == 1
+    assert explore.sweep_direction(np.zeros((200, 200), bool), pos, 173.0, 16.0) == -1  # nothing there: short way
+    assert explore.sweep_direction(_feet_at(90.0, 6.5), pos, 173.0, 16.0) == -1  # on the short side anyway
+    assert explore.sweep_direction(_feet_at(320.0, 12.0), pos, 173.0, 16.0) == -1  # too far to see a rock
+    assert explore.sweep_direction(_feet_at(300.0, 6.5), pos, 100.0, 16.0) == -1  # long way 276 deg: too long
+
+
+def test_the_search_keeps_going_the_way_it_faces_unless_going_back_is_much_nearer():
+    """Seed 29 walked east, turned back 25 m for wall feet it had passed, then crossed the canyon east again."""
+    free = np.zeros((200, 200), bool)
+    free[99:102, 20:181] = True  # an east-west corridor, the rover at its middle facing east
+    dist, _ = astar.distance_field(grid.cost_grid(free, ~free), (100, 100))
+    pos = (100.5, 100.5)
+    behind, ahead = (100, 85), (100, 120)  # 15 m back, 20 m on
+    assert explore.nearer_search_goal(behind, None, dist, ahead) == ("peek", behind)  # path alone: nearest
+    assert explore.nearer_search_goal(behind, None, dist, ahead, pos, 0.0) == ("look", ahead)
+    assert explore.nearer_search_goal(behind, None, dist, ahead, pos, 180.0) == ("peek", behind)
+    assert explore.nearer_search_goal((100, 97), None, dist, (100, 140), pos, 0.0)[1] == (100, 97)  # 3 m back beats 40 on
+    targets = np.array([[100, 85, dist[100, 85], 5], [100, 120, dist[100, 120], 5]], np.float64)
+    assert explore.nearest_target(targets) == behind and explore.nearest_target(targets, pos, 0.0) == ahead
