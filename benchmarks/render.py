@@ -4,9 +4,9 @@
                                 [--no-old] [--no-mission]
 
 Poses are the logged test_dataset poses when ../shared is present (what the twin really
-draws), else random floor poses of the world. Each pose is rendered by the renderer as it was
-before the speed work (benchmarks/render_v1.py, a frozen copy) and by sim.render, alternately,
-with the same six gold samples in the scene. Printed: median/p90 ms per frame of both (wall
+draws), else random floor poses of the world. The poses are rendered in order by sim.render, then
+by the renderer as it was before the speed work (benchmarks/render_v1.py, a frozen copy), each in
+its own pass and each pose once per pass, with the same six gold samples in the scene. Printed: median/p90 ms per frame of both (wall
 clock and CPU time of this process: on the shared 2-core machine the CPU time is the steadier
 figure), their ratio, how far the two images agree, JPEG encode time, and the frames/s of a short
 in-process mission (physics + render + JPEG + the client's perception and decision).
@@ -69,17 +69,19 @@ def compare_renderers(world, poses, samples, with_old=True):
     out = {"first_frame_s": first_new, "new_wall": [], "new_cpu": [], "old_wall": [], "old_cpu": [],
            "jpeg": [], "agree": [], "nav_agree": [], "mean_abs": [], "tracks_wall": [], "tracks_cpu": [],
            "quads": []}
-    # Each pose is drawn once per renderer and pass: drawing it twice in a row (as this benchmark once
-    # did, with tracks first) leaves the second draw's terrain and texture reads in the CPU caches and
-    # flatters it.  The old renderer draws between two new-renderer poses, as a different pose would.
+    # Each renderer draws the poses in their own pass, in order, each pose once: as a mission draws
+    # one frame after the other.  (Drawing a pose twice in a row, as this benchmark once did with
+    # tracks first, leaves the second draw's rasters in the CPU caches and flatters it; drawing the
+    # old renderer in between evicts them and penalises it.)
+    images = []
     for pose in poses:
         img, wall, cpu = _timed(lambda: new.render(pose, samples))
         out["new_wall"].append(wall)
         out["new_cpu"].append(cpu)
+        images.append(img)
         _, wall, _ = _timed(lambda: encode_jpeg(img))
         out["jpeg"].append(wall)
-        if old is None:
-            continue
+    for pose, img in zip(poses, images if old is not None else ()):
         ref, wall, cpu = _timed(lambda: old.render(pose, samples))
         out["old_wall"].append(wall)
         out["old_cpu"].append(cpu)

@@ -5,7 +5,10 @@ estimate how far the ground stays navigable (nav pixels reach, cut short by
 the nearest obstacle pixels) and pick the clear heading closest to the one
 the planner wants.
 """
+import math
+
 import numpy as np
+from numba import njit
 
 BIN_DEG = 3.0  # angular bin width, degrees
 FOV_HALF_DEG = 60.0  # profile covers +-this angle, degrees
@@ -42,20 +45,42 @@ def _binned(angles, dists):
 
 
 def reach_profile(nav_angles, nav_dists, obs_angles=None, obs_dists=None):
-    """Per-bin free distance (m) in the current frame; 0 where no ground is seen."""
-    idx, d, n = _binned(nav_angles, nav_dists)
-    counts = np.bincount(idx, minlength=n)
-    reach = np.zeros(n)
-    np.maximum.at(reach, idx, d)
+    """Per-bin free distance (m) in the current frame; 0 where no ground is seen.
+
+    The binning runs compiled (_bin_extremes, one pass per pixel list; this runs every driving
+    frame over ~10,000 pixels); the same bins and values as _binned's NumPy version."""
+    n = int(round(2 * FOV_HALF_DEG / BIN_DEG))
+    counts, reach = _bin_extremes(_flat64(nav_angles), _flat64(nav_dists), n, FOV_HALF_DEG, BIN_DEG,
+                                  NEAR_IGNORE_M, True)
     reach[counts < MIN_PIXELS] = 0.0
     if obs_angles is not None and obs_dists is not None:
-        oidx, od, _ = _binned(obs_angles, obs_dists)
-        ocount = np.bincount(oidx, minlength=n)
-        omin = np.full(n, np.inf)
-        np.minimum.at(omin, oidx, od)
+        ocount, omin = _bin_extremes(_flat64(obs_angles), _flat64(obs_dists), n, FOV_HALF_DEG, BIN_DEG,
+                                     NEAR_IGNORE_M, False)
         cut = ocount >= MIN_OBS_PIXELS
         reach[cut] = np.minimum(reach[cut], omin[cut])
     return reach
+
+
+def _flat64(values):
+    return np.ascontiguousarray(np.asarray(values, dtype=np.float64).ravel())
+
+
+@njit(cache=True)
+def _bin_extremes(angles, dists, n, fov_half_deg, bin_deg, near_m, largest):
+    """Per angular bin: the count of finite pixels beyond near_m, and their largest (else smallest)
+    distance (0 / inf for empty bins).  Bins as _bin_index: floor((degrees + fov) / bin_deg)."""
+    count = np.zeros(n, np.int64)
+    extreme = np.zeros(n) if largest else np.full(n, np.inf)
+    for i in range(min(angles.size, dists.size)):
+        a, d = angles[i], dists[i]
+        if not (math.isfinite(a) and math.isfinite(d) and d > near_m):
+            continue
+        k = math.floor((a * (180.0 / math.pi) + fov_half_deg) / bin_deg)  # np.degrees is x * (180 / pi)
+        if k < 0 or k >= n:
+            continue
+        count[k] += 1
+        extreme[k] = max(extreme[k], d) if largest else min(extreme[k], d)
+    return count, extreme
 
 
 def width_limited(reach):

@@ -147,3 +147,39 @@ def test_vision_image_is_drawn_on_first_read_and_equals_the_overlay():
     P.perception_step(r)
     r.vision_image = np.zeros((160, 320, 3), np.uint8)  # an explicit image replaces the pending drawing
     assert not r.vision_image.any()
+
+
+def _reference_reach_profile(nav_angles, nav_dists, obs_angles, obs_dists):
+    """navigation.reactive.reach_profile as it was in NumPy (the reference for the compiled binning)."""
+    from navigation import reactive as R
+
+    idx, d, n = R._binned(nav_angles, nav_dists)
+    counts = np.bincount(idx, minlength=n)
+    reach = np.zeros(n)
+    np.maximum.at(reach, idx, d)
+    reach[counts < R.MIN_PIXELS] = 0.0
+    oidx, od, _ = R._binned(obs_angles, obs_dists)
+    ocount = np.bincount(oidx, minlength=n)
+    omin = np.full(n, np.inf)
+    np.minimum.at(omin, oidx, od)
+    cut = ocount >= R.MIN_OBS_PIXELS
+    reach[cut] = np.minimum(reach[cut], omin[cut])
+    return reach
+
+
+def test_compiled_reach_profile_equals_the_numpy_reference(test_dataset_dir):
+    from navigation import reactive
+    from replay.log_format import read_log
+
+    rng = np.random.default_rng(7)
+    for f in read_log(test_dataset_dir).frames[::15]:
+        r = RoverState()
+        r.img, r.pos, r.yaw = cv2.cvtColor(cv2.imread(str(f.image_path)), cv2.COLOR_BGR2RGB), (f.x, f.y), f.yaw
+        P.perception_step(r)
+        args = [np.asarray(v, np.float64) for v in (r.nav_angles, r.nav_dists, r.obs_angles, r.obs_dists)]
+        # bin edges exactly, NaN, inf and pixels under NEAR_IGNORE_M too
+        edges = np.radians(np.arange(-60.0, 61.0, reactive.BIN_DEG))
+        args[0] = np.concatenate([args[0], edges, [np.nan, 0.1, 0.2]])
+        args[1] = np.concatenate([args[1], rng.uniform(0.3, 9, edges.size), [2.0, np.inf, 0.4]])
+        new, ref = reactive.reach_profile(*args), _reference_reach_profile(*args)
+        assert np.array_equal(new, ref) and (ref > 0).sum() >= 5
