@@ -657,7 +657,7 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
 
     One compiled pass (:func:`_vote_kernel`) instead of a dozen NumPy passes over the ~7000 seen
     cells: the same arithmetic in the same order, so the maps are bit for bit what the NumPy
-    version (kept in tests/test_perception.py as the reference) gives.
+    version (kept in tests/test_fast_paths_exact.py as the reference) gives.
     """
     a = math.radians(yaw)
     window = np.zeros(4, np.int64)
@@ -745,7 +745,7 @@ def _pixel_labels(img: np.ndarray):
     labels8: 255 light sand, _SHADE_VALUE sand in shadow, _DIM_SHADE_VALUE darker sand in shadow,
     0 anything else (what label_grid warps); the others uint8 0/255 masks as navigable_mask,
     rock_mask and shadowed_sand_mask give them.  Bit for bit what the OpenCV/NumPy chain of
-    those functions gives (tests/test_perception_exact.py), at a fraction of its dozen passes.
+    those functions gives (tests/test_fast_paths_exact.py), at a fraction of its dozen passes.
     """
     if SHADE_SAND_WINDOW_H_PX != 1:  # the kernel slides a one-row window only
         return _pixel_labels_opencv(img)

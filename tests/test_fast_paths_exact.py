@@ -1,5 +1,5 @@
-"""The compiled and rewritten hot paths of perception give bit-identical maps to the plain NumPy
-versions they replaced (kept here as references): speed work must not change a single vote."""
+"""The compiled and rewritten hot paths of the client (perception, navigation) give bit-identical results
+to the plain NumPy versions they replaced (kept here as references): speed work must not change a vote."""
 import math
 
 import cv2
@@ -183,3 +183,16 @@ def test_compiled_reach_profile_equals_the_numpy_reference(test_dataset_dir):
         args[1] = np.concatenate([args[1], rng.uniform(0.3, 9, edges.size), [2.0, np.inf, 0.4]])
         new, ref = reactive.reach_profile(*args), _reference_reach_profile(*args)
         assert np.array_equal(new, ref) and (ref > 0).sum() >= 5
+
+
+def test_width_limited_equals_the_sliding_window_minimum():
+    from navigation import reactive
+
+    k = reactive.ROVER_HALF_WIDTH_BINS
+    rng = np.random.default_rng(11)
+    for i in range(300):
+        reach = rng.uniform(0, 10, 40) * (rng.random(40) < 0.8)
+        if i % 10 == 0:
+            reach[rng.integers(40)] = np.nan
+        ref = np.lib.stride_tricks.sliding_window_view(np.pad(reach, k), 2 * k + 1).min(axis=1)
+        assert np.array_equal(reactive.width_limited(reach), ref, equal_nan=True)
