@@ -9,9 +9,11 @@ Conventions (docs/ARCHITECTURE.md): x east, y north, z up, metres; rasters are
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 WORLD_SIZE_M = 200.0  # side of the square world, m
 TERRAIN_SAMPLES = 513  # terrain height vertex grid side, samples
@@ -40,6 +42,25 @@ def _bilinear(grid: np.ndarray, fx, fy):
     out = ((grid[r0, c0] * (1 - tx) + grid[r0, c0 + 1] * tx) * (1 - ty)
            + (grid[r0 + 1, c0] * (1 - tx) + grid[r0 + 1, c0 + 1] * tx) * ty)
     return float(out) if np.ndim(out) == 0 else out
+
+
+@njit(cache=True, nogil=True)
+def _clamped_bilinear(grid, xs, ys, size_m, cell_m, out):
+    """World.height_at for flat float64 arrays, compiled: the same clamp, divisions, floor, clip and
+    blend, in the same order, as clamp_xy + _bilinear (so bit-identical); NaN in gives NaN out."""
+    n = grid.shape[0] - 1
+    for i in range(xs.size):
+        fx = min(max(xs[i], 0.0), size_m) / cell_m if xs[i] == xs[i] else xs[i]
+        fy = min(max(ys[i], 0.0), size_m) / cell_m if ys[i] == ys[i] else ys[i]
+        if fx != fx or fy != fy:
+            out[i] = math.nan
+            continue
+        c0 = min(max(math.floor(fx), 0), n - 1)
+        r0 = min(max(math.floor(fy), 0), n - 1)
+        tx = fx - c0
+        ty = fy - r0
+        out[i] = ((grid[r0, c0] * (1 - tx) + grid[r0, c0 + 1] * tx) * (1 - ty)
+                  + (grid[r0 + 1, c0] * (1 - tx) + grid[r0 + 1, c0 + 1] * tx) * ty)
 
 
 @dataclass
@@ -72,7 +93,21 @@ class World:
         return x, y
 
     def height_at(self, x, y):
-        """Terrain height (m) by bilinear interpolation; scalars or arrays; clamped to the world."""
+        """Terrain height (m) by bilinear interpolation; scalars or arrays; clamped to the world.
+
+        Same-shape inputs take a compiled path (the physics asks a few times per step for four
+        points; NumPy's per-call overhead was most of the time); broadcasting shapes the NumPy one."""
+        xa = np.asarray(x, dtype=np.float64)
+        ya = np.asarray(y, dtype=np.float64)
+        if xa.shape == ya.shape and self.terrain_height.shape[0] == self.terrain_height.shape[1]:
+            out = np.empty(xa.shape)
+            _clamped_bilinear(self.terrain_height, np.ascontiguousarray(xa).ravel(), np.ascontiguousarray(ya).ravel(),
+                              float(self.size_m), float(self.terrain_cell_m), out.reshape(-1))
+            return float(out) if out.ndim == 0 else out
+        return self._height_at_numpy(x, y)
+
+    def _height_at_numpy(self, x, y):
+        """height_at in NumPy (any broadcastable shapes; the reference the compiled path is tested against)."""
         x, y = self.clamp_xy(x, y)
         return _bilinear(self.terrain_height, x / self.terrain_cell_m, y / self.terrain_cell_m)
 

@@ -135,3 +135,18 @@ def test_surface_and_floor_queries_vectorised():
     surface = w.surface_at(xs, ys)
     assert surface[0] == pytest.approx(0.0) and surface[1] > 0.3
     assert w.is_solid(xs, ys, np.array([0.1, 0.1])).tolist() == [False, True]
+
+
+def test_compiled_height_lookup_equals_the_numpy_one_bit_for_bit(real_world):
+    """The physics' terrain lookups take a compiled path; it must give exactly the NumPy values
+    (also outside the world, on grid nodes, at the edges, for NaN and infinities)."""
+    rng = np.random.default_rng(0)
+    nodes = np.arange(0.0, 200.01, real_world.terrain_cell_m)
+    x = np.concatenate([rng.uniform(-5, 205, 20000), nodes, [np.nan, 0.0, 200.0, 1e9, -1e9, np.inf]])
+    y = np.concatenate([rng.uniform(-5, 205, 20000), nodes[::-1], [1.0, np.nan, 200.0, 3.0, np.inf, -np.inf]])
+    new, ref = real_world.height_at(x, y), real_world._height_at_numpy(x, y)
+    assert new.dtype == ref.dtype and np.array_equal(new, ref, equal_nan=True)
+    assert np.ptp(ref[np.isfinite(ref)]) > 1.0  # real relief, not a flat corner
+    assert real_world.height_at(x[:4].reshape(2, 2), y[:4].reshape(2, 2)).shape == (2, 2)
+    scalar = real_world.height_at(99.7, 85.6)
+    assert isinstance(scalar, float) and scalar == real_world._height_at_numpy(99.7, 85.6)
