@@ -12,9 +12,10 @@ recorded at a quality level with cast shadows and keeps the `--shadows on` look.
    floor is drawn with a weight averaged over metres of floor: dark wherever a wall foot lies
    within that reach, bright only in the middle of wide floor. With no fitted parameter beyond the
    rock layers' colour and a mip cap, this predicts the far floor's brightness per distance band
-   (0.98 at 6.5 m, 0.90 at 9 m, 0.81 at 11.5 m, 0.67 at 15 m, 0.58 at 24 m of the near floor; real:
-   0.93, 0.88, 0.77, 0.64, 0.56 on megalphian) and, pixel by pixel, correlates 0.5-0.7 with the real
-   frames' far-floor brightness, which a distance curve cannot (0: it is one value per distance).
+   (5-6.5, 6.5-8, 8-10, 10-13, 13-18, 18-30 m: 0.98, 0.95, 0.90, 0.82, 0.67, 0.58 of the near floor;
+   real on megalphian: 0.95, 0.93, 0.88, 0.77, 0.64, 0.56, the near floor itself being at 0.95) and,
+   pixel by pixel, correlates 0.4-0.7 with the real frames' far-floor brightness within 18 m, which
+   a distance curve cannot (it draws one value per distance).
    The far floor also turns redder because the rock layers are (green / red 0.68 against 0.91).
    An earlier distance curve (knee 5.2 m, e-folding 8.65 m) fitted the medians but drew all far
    floor alike, so the whole-view masks missed the bright far floor of open stretches.
