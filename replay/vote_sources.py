@@ -6,7 +6,9 @@ votes with one class of votes left out at a time (a range band, standing still, 
 close to a wall, a mission mode), so each class's effect on mapped / fidelity is measured, not
 guessed.  Per class it also gives the light-sand share of the votes landing on the false
 navigable cells and on the correctly mapped edge cells: a class worth gating is one whose
-votes call the false cells floor much more often than the true edge cells.
+votes call the false cells floor much more often than the true edge cells.  Last, the
+near-confirmation check (a cell whose views from within 5 m see mostly no sand is not floor,
+whatever the far views say) against the curve the scored light share alone draws.
 
 Written for issue 27 (why twin missions mapped at ~95 % fidelity); findings in docs/perception.md.
 Outputs in --out: ``errors.png`` (north up; grey mapped floor, red false navigable, blue missed
@@ -34,6 +36,13 @@ YAW_RATE_BANDS_DEG_S = (0.0, 5.0, 30.0, np.inf)  # |yaw rate| bands, deg/s
 WALL_BANDS_M = (0.0, 1.5, 3.0, np.inf)  # rover's distance to the nearest non-floor cell of the truth, m
 ERROR_SCALE = 4  # errors.png pixels per map cell
 PATH_EVERY = 10  # errors.png draws every Nth rover position
+# The near-confirmation check (issue 27, fourth round; not in perception: see docs/perception.md).  Sand h above
+# the floor seen from d metres projects d*h/(H-h) too far, so a sunlit wall foot seen from afar lands a cell
+# outwards; the check turns down a cell whose near views see mostly no sand, whatever the far ones say.
+NEAR_CONFIRM_RANGE_M = 5.0  # votes from ground nearer than this to the rover are near views, m
+NEAR_CONFIRM_MIN_VOTES = 2.0  # weighted near votes a cell needs before the check applies to it
+NEAR_CHECKS = ((0.15, 0.5), (0.2, 0.4), (0.2, 0.5), (0.25, 0.5))  # (scored light share, near sand share) reported
+CURVE_SHARES = tuple(np.round(np.arange(0.05, 0.451, 0.025), 3))  # scored light shares of the reference curve
 
 
 @dataclass
@@ -41,7 +50,8 @@ class VoteLog:
     """Every map vote of a replay, summed per (frame, cell, range band).
 
     frame: int32 (N,) index into ``features``; cell: int32 (N,) = y * 200 + x; band: int8 (N,) range band;
-    votes: float32 (N, 4) light sand, everything else (as obs_votes), sand in shadow, darker sand in shadow.
+    votes: float32 (N, 6) light sand, everything else (as obs_votes), sand in shadow, darker sand in shadow,
+        and of all these the part from ground within NEAR_CONFIRM_RANGE_M: all, and light plus shadowed sand.
     features: float64 (frames, 7) t s, x m, y m, yaw deg, pitch deg, roll deg, speed m/s.
     """
     frame: np.ndarray
@@ -60,7 +70,7 @@ class VoteLog:
 
 
 def _frame_votes(mem, x: float, y: float, yaw: float):
-    """The cells, range bands, weights and labels ``perception._vote`` used for the last frame."""
+    """The cells, range bands, weights, labels and near flags ``perception._vote`` used for the last frame."""
     labels = mem.last_grid.ravel()[perception._MAP_CELLS]
     idx = np.flatnonzero(labels != perception._LABEL_UNKNOWN)
     xw, yw = perception.rover_to_world(perception._MAP_X[idx], perception._MAP_Y[idx], x, y, yaw)
@@ -69,7 +79,8 @@ def _frame_votes(mem, x: float, y: float, yaw: float):
     ok = (ix >= 0) & (ix < n) & (iy >= 0) & (iy < n)
     idx = idx[ok]
     band = np.clip(np.digitize(perception._MAP_DIST[idx], RANGE_BANDS_M) - 1, 0, len(RANGE_BANDS_M) - 2)
-    return iy[ok] * n + ix[ok], band, perception._MAP_WEIGHT[idx], labels[idx]
+    near = perception._MAP_DIST[idx] < NEAR_CONFIRM_RANGE_M
+    return iy[ok] * n + ix[ok], band, perception._MAP_WEIGHT[idx], labels[idx], near
 
 
 def collect(log_path, ground_truth=None, progress: bool = False) -> VoteLog:
@@ -86,11 +97,12 @@ def collect(log_path, ground_truth=None, progress: bool = False) -> VoteLog:
                       float(rover.pitch), float(rover.roll), frame.speed))
         if not rover.map_updated:
             return
-        cell, band, w, lab = _frame_votes(perception.get_memory(rover), float(rover.pos[0]), float(rover.pos[1]),
-                                          float(rover.yaw))
+        cell, band, w, lab, near = _frame_votes(perception.get_memory(rover), float(rover.pos[0]), float(rover.pos[1]),
+                                                float(rover.yaw))
         uk, inv = np.unique(cell * nb + band, return_inverse=True)
+        sand = (lab == perception._LABEL_NAV) | (lab == perception._LABEL_SHADE) | (lab == perception._LABEL_DIM_SHADE)
         cols = [lab == perception._LABEL_NAV, lab != perception._LABEL_NAV,
-                lab == perception._LABEL_SHADE, lab == perception._LABEL_DIM_SHADE]
+                lab == perception._LABEL_SHADE, lab == perception._LABEL_DIM_SHADE, near, near & sand]
         votes = np.stack([np.bincount(inv, w * c, len(uk)) for c in cols], 1).astype(np.float32)
         parts.append((np.full(len(uk), len(feats) - 1, np.int32), uk, votes))
 
@@ -104,14 +116,63 @@ def collect(log_path, ground_truth=None, progress: bool = False) -> VoteLog:
                    np.concatenate([p[2] for p in parts]), feats, np.array(rover.worldmap, copy=True))
 
 
-def rebuild(votes: VoteLog, keep: Optional[np.ndarray] = None) -> np.ndarray:
-    """The scored worldmap the kept votes (bool per vote row; None = all) give, by perception's own rules."""
+def _memory(votes: VoteLog, keep: Optional[np.ndarray] = None):
+    """(perception memory, near votes, near sand votes) of the kept votes."""
     mem = perception.PerceptionMemory()
     n = perception.WORLD_SIZE
     w = np.ones(len(votes.cell)) if keep is None else keep.astype(np.float64)
+    sums = [np.bincount(votes.cell, votes.votes[:, col] * w, n * n).reshape(n, n).astype(np.float32) for col in range(6)]
     for arr, col in ((mem.nav_votes, 0), (mem.obs_votes, 1), (mem.shade_votes, 2), (mem.dim_shade_votes, 3)):
-        arr += np.bincount(votes.cell, votes.votes[:, col] * w, n * n).reshape(n, n).astype(np.float32)
-    return perception.render_worldmap(mem)
+        arr += sums[col]
+    return mem, sums[4], sums[5]
+
+
+def _render(mem, share: Optional[float] = None) -> np.ndarray:
+    """perception.render_worldmap, with the scored light share set to ``share`` for this call only."""
+    if share is None:
+        return perception.render_worldmap(mem)
+    saved = perception.SCORED_NAV_MAJORITY
+    perception.SCORED_NAV_MAJORITY = share
+    try:
+        return perception.render_worldmap(mem)
+    finally:
+        perception.SCORED_NAV_MAJORITY = saved
+
+
+def near_veto(worldmap: np.ndarray, near: np.ndarray, near_sand: np.ndarray, min_sand_share: float) -> np.ndarray:
+    """The map with the near-confirmation check applied: a navigable cell with at least NEAR_CONFIRM_MIN_VOTES
+    near votes of which less than ``min_sand_share`` are sand becomes obstacle."""
+    out = worldmap.copy()
+    veto = (out[:, :, 2] > 0) & (near >= NEAR_CONFIRM_MIN_VOTES) & (near_sand < min_sand_share * near)
+    out[:, :, 2][veto] = 0
+    out[:, :, 0][veto] = 255
+    return out
+
+
+def rebuild(votes: VoteLog, keep: Optional[np.ndarray] = None) -> np.ndarray:
+    """The scored worldmap the kept votes (bool per vote row; None = all) give, by perception's own rules."""
+    return _render(_memory(votes, keep)[0])
+
+
+def near_confirmation(votes: VoteLog, truth: np.ndarray) -> Dict:
+    """The share curve, and each NEAR_CHECKS pair's mapped / fidelity and its fidelity gain over the curve at
+    equal mapped (the curve interpolated at the check's mapped figure)."""
+    from evaluation.metrics import score_map
+
+    mem, near, near_sand = _memory(votes)
+    curve = []
+    for share in CURVE_SHARES:
+        s = score_map(_render(mem, share), truth)
+        curve.append((float(share), round(s.mapped_pct, 2), round(s.fidelity_pct, 2)))
+    pts = np.array([c[1:] for c in curve])
+    order = np.argsort(pts[:, 0])
+    checks = []
+    for share, min_sand in NEAR_CHECKS:
+        s = score_map(near_veto(_render(mem, share), near, near_sand, min_sand), truth)
+        gain = s.fidelity_pct - float(np.interp(s.mapped_pct, pts[order, 0], pts[order, 1]))
+        checks.append({"share": share, "near_sand_share": min_sand, "mapped_pct": round(s.mapped_pct, 2),
+                       "fidelity_pct": round(s.fidelity_pct, 2), "gain_at_equal_mapped": round(gain, 2)})
+    return {"share_curve": curve, "checks": checks}
 
 
 def _bands(values, edges, unit):
@@ -172,6 +233,7 @@ def attribute(votes: VoteLog, truth: np.ndarray, modes: Optional[np.ndarray] = N
                          "light_share_edge": light_share(sel & edge_cells),
                          "without_mapped_pct": round(s.mapped_pct, 2), "without_fidelity_pct": round(s.fidelity_pct, 2)})
         out["factors"][factor] = rows
+    out["near_confirmation"] = near_confirmation(votes, truth)
     return out
 
 
@@ -222,6 +284,14 @@ def main(argv=None) -> int:
         for row in rows:
             print(f"{factor:14} {row['band']:16} {row['votes_pct']:8.1f} {str(row['light_share_false']):>12} "
                   f"{str(row['light_share_edge']):>11} {row['without_mapped_pct']:>21.2f} / {row['without_fidelity_pct']:.2f}")
+    nc = report["near_confirmation"]
+    print("share curve (scored light share: mapped / fidelity %): "
+          + ", ".join(f"{s:g}: {m:.2f} / {f:.2f}" for s, m, f in nc["share_curve"]))
+    print(f"near confirmation (within {NEAR_CONFIRM_RANGE_M:g} m): share, near sand share -> mapped / fidelity %, "
+          "fidelity gain over the share curve at equal mapped")
+    for c in nc["checks"]:
+        print(f"  {c['share']:.3g}, {c['near_sand_share']:.3g} -> {c['mapped_pct']:.2f} / {c['fidelity_pct']:.2f}, "
+              f"{c['gain_at_equal_mapped']:+.2f}")
     print(f"errors.png and vote_sources.json in {out}")
     return 0
 

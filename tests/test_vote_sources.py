@@ -18,3 +18,18 @@ def test_votes_rebuild_the_replayed_map_and_attribute_every_class(test_dataset_d
     assert ranges[-1]["without_mapped_pct"] < report["all"]["mapped_pct"] - 1.0
     img = error_image(votes.worldmap, ground_truth, votes.features)
     assert img.shape[2] == 3 and (img[:, :, 2] == 255).any()  # some false navigable cells are drawn red
+
+
+def test_near_confirmation_only_turns_down_cells_near_views_saw_without_sand(test_dataset_dir, ground_truth):
+    from replay.vote_sources import _memory, _render, near_confirmation, near_veto
+
+    votes = collect(test_dataset_dir, ground_truth)
+    mem, near, near_sand = _memory(votes)
+    base = _render(mem)
+    assert np.array_equal(near_veto(base, near, near_sand, 0.0), base)  # a zero share turns nothing down
+    strict = near_veto(base, near, near_sand, 1.01)  # every navigable cell with enough near votes goes
+    gone = (base[:, :, 2] > 0) & (strict[:, :, 2] == 0)
+    assert gone.sum() > 20 and (near[gone] >= 2.0).all() and not ((strict[:, :, 2] > 0) & (base[:, :, 2] == 0)).any()
+    assert (near_sand <= near + 1e-3).all() and near.sum() < votes.votes[:, :2].sum()
+    report = near_confirmation(votes, ground_truth)
+    assert len(report["share_curve"]) > 10 and all("gain_at_equal_mapped" in c for c in report["checks"])
