@@ -731,6 +731,10 @@ def _stage_approach(rover, nav, s, dist):
             return None
         free = _grids(rover)[0]
         nav.stage_for, nav.stage_done = nav.rock_target, False
+        # each decided approach gets its own SAMPLE_CLOSE_TIMEOUT_S (SAMPLE_TIMEOUT_S still bounds the
+        # rock): seed 37 (15 fps) wedged twice at the east nook, and the close timer ran out as it drove
+        # to the third staging point, the one that works; it came back 70 s later and collected from there
+        nav.rock_close_since = None
         nav.stage = approach.plan_approach(free, _blocked(nav, s), nav.rock_target, _arrival_point(nav, s))
         if nav.stage is not None:
             log.info("rock at (%.1f, %.1f): lining up at (%.1f, %.1f) first", *nav.rock_target, *nav.stage[:2])

@@ -424,3 +424,23 @@ def test_turning_round_with_a_sample_missing_sweeps_the_camera_over_unsearched_w
     assert faced == expect_left
     assert abs((yaw - 16.0 + 180.0) % 360.0 - 180.0) <= decision.ROTATE_EXIT_DEG + 3.0
     assert t - 10.0 < decision.ROTATE_TIMEOUT_S
+
+
+def test_a_rock_approach_decided_again_after_a_stuck_gets_its_own_close_timeout():
+    """Seed 37 wedged twice at the east nook; the 30 s close timer ran out on the way to the third
+    staging point (the one that works) and the rock was given up for 60 s."""
+    r = make_rover(pos=(110.0, 85.0), yaw=0.0, t=100.0)
+    nav = r.nav
+    nav.rock_target, nav.rock_since = (113.0, 85.0), 60.0  # 3 m ahead, chased for 40 s of the 90
+    nav.rock_close_since = 100.0 - decision.SAMPLE_CLOSE_TIMEOUT_S + 1.0  # close for 29 s
+    nav.stage_for = None  # a stuck just now: the approach is decided again
+    empty = np.zeros(0)
+    for t in (100.0, 100.0 + 2.0):  # 31 s after first coming close
+        s = decision.Inputs(t, r.pos, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
+        decision.mode_sample(r, nav, s)
+    assert nav.rock_target is not None, "given up although the new approach had just started"
+    nav.stage_for = nav.rock_target  # no new stuck: the timer runs on to the end
+    s = decision.Inputs(100.0 + 2.0 + decision.SAMPLE_CLOSE_TIMEOUT_S + 0.5, r.pos, 0.0, 0.0, *clear_view(),
+                        empty, empty, empty, empty, False, False, 1)
+    decision.mode_sample(r, nav, s)
+    assert nav.rock_target is None
