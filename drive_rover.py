@@ -403,6 +403,7 @@ def main(argv=None) -> int:
     _, wsgi_app = wire_server.build_server(client, recorder, map_saver, hosts=(args.host,),
                                            dashboard=FrameObservers(status, dashboard), link=status)
     eventlet.spawn(_report_status, status, client)
+    log.info("compiled kernels ready in %.1f s", client.warm_up())  # not during the first telemetry
     log.info("listening on %s:%d; now start the simulator and choose Autonomous mode", host, port)
 
     def _shutdown(signum, frame):

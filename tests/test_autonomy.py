@@ -287,3 +287,16 @@ def test_return_deadline_reaches_every_mission_and_is_checked_on_the_command_lin
     for bad in ("0", "-1", "nan", "inf", "soon"):
         with pytest.raises(SystemExit):
             drive_rover.parse_args(["--home-by", bad])
+
+
+def test_warm_up_compiles_the_kernels_and_leaves_the_client_untouched():
+    import perception
+    from navigation import reactive
+
+    client = AutonomyClient()
+    rover = client.rover
+    seconds = client.warm_up()
+    assert seconds >= 0.0
+    assert client.rover is rover and rover.frame_count == 0 and getattr(rover, "perception_memory", None) is None
+    assert perception._pixel_labels_kernel.signatures and perception._vote_kernel.signatures
+    assert reactive._bin_extremes.signatures  # the driving frame's binning too
