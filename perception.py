@@ -806,6 +806,40 @@ def _pixel_labels_kernel(img, nav_min, rock_min, rock_max, shade_min_r, pocket_m
             labels8[v, u] = 255 if nav else ((dim_value if r < pocket_min_r else shade_value) if shade else 0)
 
 
+def _polar_outputs(grid: np.ndarray):
+    """(nav_angles, nav_dists, obs_angles, obs_dists) of a label grid, in grid (C) order: the cells
+    labelled navigable, and the seen ones that are not, as ``_GRID_ANGLE[mask]`` would list them."""
+    n_nav, n_obs = _count_labels(grid.ravel(), _LABEL_NAV, _LABEL_UNKNOWN)
+    out = (np.empty(n_nav, np.float32), np.empty(n_nav, np.float32), np.empty(n_obs, np.float32),
+           np.empty(n_obs, np.float32))
+    _gather_polar(grid.ravel(), _GRID_ANGLE.ravel(), _GRID_DIST.ravel(), _LABEL_NAV, _LABEL_UNKNOWN, *out)
+    return out
+
+
+@njit(cache=True)
+def _count_labels(labels, nav_label, unknown_label):
+    n_nav = n_obs = 0
+    for lab in labels:
+        if lab == nav_label:
+            n_nav += 1
+        elif lab != unknown_label:
+            n_obs += 1
+    return n_nav, n_obs
+
+
+@njit(cache=True)
+def _gather_polar(labels, angle, dist, nav_label, unknown_label, nav_a, nav_d, obs_a, obs_d):
+    i = j = 0
+    for k in range(labels.size):
+        lab = labels[k]
+        if lab == nav_label:
+            nav_a[i], nav_d[i] = angle[k], dist[k]
+            i += 1
+        elif lab != unknown_label:
+            obs_a[j], obs_d[j] = angle[k], dist[k]
+            j += 1
+
+
 def perception_step(rover):
     """Fill the perception block of RoverState from rover.img and the pose; returns rover."""
     mem = get_memory(rover)
@@ -825,12 +859,7 @@ def perception_step(rover):
 
     # decision outputs (always, even when tilted: the warp already accounts for tilt);
     # the rover drives on bright sand only, so shadowed sand is an obstacle here
-    nav_cells = grid == _LABEL_NAV
-    obs_cells = (grid != _LABEL_UNKNOWN) & (grid != _LABEL_NAV)
-    rover.nav_angles = _GRID_ANGLE[nav_cells]
-    rover.nav_dists = _GRID_DIST[nav_cells]
-    rover.obs_angles = _GRID_ANGLE[obs_cells]
-    rover.obs_dists = _GRID_DIST[obs_cells]
+    rover.nav_angles, rover.nav_dists, rover.obs_angles, rover.obs_dists = _polar_outputs(grid)
 
     pos = getattr(rover, "pos", (np.nan, np.nan))
     pose_ok = pos is not None and len(pos) == 2 and _finite(pos[0]) and _finite(pos[1]) and _finite(rover.yaw)

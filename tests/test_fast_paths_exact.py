@@ -196,3 +196,15 @@ def test_width_limited_equals_the_sliding_window_minimum():
             reach[rng.integers(40)] = np.nan
         ref = np.lib.stride_tricks.sliding_window_view(np.pad(reach, k), 2 * k + 1).min(axis=1)
         assert np.array_equal(reactive.width_limited(reach), ref, equal_nan=True)
+
+
+def test_polar_outputs_equal_the_masked_tables():
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        grid = rng.integers(0, 5, (P._GRID_ROWS, P._GRID_COLS)).astype(np.uint8)
+        grid[rng.random(grid.shape) < 0.5] = P._LABEL_UNKNOWN
+        nav = grid == P._LABEL_NAV
+        obs = (grid != P._LABEL_UNKNOWN) & ~nav
+        ref = (P._GRID_ANGLE[nav], P._GRID_DIST[nav], P._GRID_ANGLE[obs], P._GRID_DIST[obs])
+        for a, b in zip(P._polar_outputs(grid), ref):
+            assert a.dtype == b.dtype and np.array_equal(a, b)
