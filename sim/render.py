@@ -803,6 +803,10 @@ def _baked_for(world: World):
     return baked
 
 
+_NO_PYRAMID = np.zeros((1, 1, 1), np.float32)  # stands in for the splat mipmaps of worlds drawn with cast shadows
+_NO_GAIN = np.ones(IMAGE_W)  # the back-scatter gain per column when the lobe is off
+
+
 class Renderer:
     """Bakes a World once; `.render(pose, samples)` draws camera frames."""
 
@@ -827,6 +831,11 @@ class Renderer:
         self._dark_lut = _darkening_lut(bool(world.cast_shadows))
         self._splat_mip = None if world.cast_shadows else _splat_mip(world)  # (weight mipmaps, texel m)
         self.backscatter = True  # the floor's bright lobe away from the sun (sim/shading.py); False: plain Lambert
+        self.fused_floor_look = True  # False: far floor and lobe drawn by the two separate passes (the test oracle)
+        from sim.shading import ROCK_LAYER_RGB
+
+        self._sand_rgb_f64 = np.array(SAND_LUT_RGB[-1], np.float64)  # pure sand's colour, the splat map's bright end
+        self._rock_layer_rgb_f64 = np.array(ROCK_LAYER_RGB, np.float64)
         self.column_share_m = COLUMN_SHARE_MAX_M  # 0: every column marched (the reference image)
         self._col_order, self._col_offset = column_plan(IMAGE_W, COLUMN_SHARE_TIERS)
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
@@ -872,27 +881,37 @@ class Renderer:
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
                        COLUMN_SHARE_LEVELS, self._col_order, self._col_offset)
-        if self._splat_mip is not None:
-            from sim import shading
-
-            shading.apply_splat_mip(img, depth, origin, np.ascontiguousarray(rot), self.ray_a, self.ray_b,
-                                    self._splat_mip[0], self._splat_mip[1], FOCAL_PX, terrain,
-                                    1.0 / float(self.world.terrain_cell_m), np.array(SAND_LUT_RGB[-1], np.float64),
-                                    np.array(shading.ROCK_LAYER_RGB, np.float64), shading.SPLAT_LOD_BIAS,
-                                    shading.SPLAT_LOD_MAX, shading.SPLAT_MIN_SIN, shading.ROCK_HIT_ABOVE_GROUND_M)
-        if self.backscatter:
-            from sim import shading
-
-            rot_c = np.ascontiguousarray(rot)
-            shading.apply_backscatter(img, depth, origin, rot_c, self.ray_a, self.ray_b,
-                                      shading.backscatter_columns(rot_c, self.ray_a, SUN_AZIMUTH_DEG), terrain,
-                                      1.0 / float(self.world.terrain_cell_m), shading.ROCK_HIT_ABOVE_GROUND_M)
+        if self._splat_mip is not None or self.backscatter:
+            self._draw_floor_look(img, depth, origin, np.ascontiguousarray(rot))
         if tracks is not None:
             self.draw_tracks(img, depth, origin, rot, tracks)
         self.draw_samples(img, depth, origin, rot, samples)
         self.last_depth = depth  # distance along the ray / |forward|, inf for sky
         self._last_camera = (origin, rot)
         return img
+
+    def _draw_floor_look(self, img, depth, origin, rot):
+        """The shadowless far floor (splat mipmaps) and the back-scatter lobe (sim/shading.py), in place."""
+        from sim import shading
+
+        terrain, inv_tcell = self._terrain, 1.0 / float(self.world.terrain_cell_m)
+        sand, rock = self._sand_rgb_f64, self._rock_layer_rgb_f64
+        gain = shading.backscatter_columns(rot, self.ray_a, SUN_AZIMUTH_DEG) if self.backscatter else None
+        if not self.fused_floor_look:  # the two passes as first written: the oracle of the fused one
+            if self._splat_mip is not None:
+                shading.apply_splat_mip(img, depth, origin, rot, self.ray_a, self.ray_b, self._splat_mip[0],
+                                        self._splat_mip[1], FOCAL_PX, terrain, inv_tcell, sand, rock,
+                                        shading.SPLAT_LOD_BIAS, shading.SPLAT_LOD_MAX, shading.SPLAT_MIN_SIN,
+                                        shading.ROCK_HIT_ABOVE_GROUND_M)
+            if gain is not None:
+                shading.apply_backscatter(img, depth, origin, rot, self.ray_a, self.ray_b, gain, terrain, inv_tcell,
+                                          shading.ROCK_HIT_ABOVE_GROUND_M)
+            return
+        pyr, texel_m = self._splat_mip if self._splat_mip is not None else (_NO_PYRAMID, 1.0)
+        shading.apply_floor_look(img, depth, origin, rot, self.ray_a, self.ray_b, pyr, texel_m, FOCAL_PX, terrain,
+                                 inv_tcell, sand, rock, shading.SPLAT_LOD_BIAS, shading.SPLAT_LOD_MAX,
+                                 shading.SPLAT_MIN_SIN, shading.ROCK_HIT_ABOVE_GROUND_M,
+                                 gain if gain is not None else _NO_GAIN, self._splat_mip is not None)
 
     @property
     def last_hit(self) -> np.ndarray:

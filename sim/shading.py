@@ -191,3 +191,156 @@ def apply_backscatter(img, depth, origin, rot, ray_a, ray_b, column_gain, terrai
                 continue
             for ch in range(3):
                 img[v, u, ch] = np.uint8(min(img[v, u, ch] * g + 0.5, 255.0))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _texel_bilinear_scaled(pyr, k, qx, qy):
+    """`_texel_bilinear` from the point in level-0 texels (qx, qy = x / texel_m, y / texel_m): the same value, as
+    x / (texel_m * 2**k) == (x / texel_m) * 2**-k exactly (scaling by a power of two commutes with rounding)."""
+    n = pyr.shape[1] >> k
+    scale = 1.0 / (1 << k)
+    fx = min(max(qx * scale - 0.5, 0.0), n - 1.0001)
+    fy = min(max(qy * scale - 0.5, 0.0), n - 1.0001)
+    c, r = int(fx), int(fy)
+    ax, ay = fx - c, fy - r
+    return ((pyr[k, r, c] * (1.0 - ax) + pyr[k, r, c + 1] * ax) * (1.0 - ay)
+            + (pyr[k, r + 1, c] * (1.0 - ax) + pyr[k, r + 1, c + 1] * ax) * ay)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_px, terrain, inv_tcell,
+                     sand_rgb, rock_rgb, lod_bias, lod_max, min_sin, rock_above_m, column_gain, splat_mip):
+    """`apply_splat_mip` (when splat_mip) then `apply_backscatter` in one pass, in place: the same pixels and the
+    same arithmetic on each, so the same bytes (tests/test_shading.py holds it to the two passes as the oracle).
+
+    ~40 % less time than the two passes: each hit point and its terrain height are found once, not twice;
+    the work goes row by row in stages (directions and hit points for the whole row; the pixels either term
+    applies to; their terrain cells, vertices and slopes; footprints; mip levels; colours), so the compiler
+    vectorises the branch-free ones and the divisions of independent pixels overlap; Python's zero-division
+    checks are off (error_model="numpy": no divisor here is 0 for a pixel that is used)."""
+    h, w = depth.shape
+    min_foot = texel_m
+    near2 = min_foot * focal_px * MIN_FOOT_HEIGHT_M
+    buf = np.empty((13, w))
+    CX, CY, AX, AY = np.empty(w), np.empty(w), np.empty(w), np.empty(w)
+    T00, T01, T10, T11 = np.empty(w), np.empty(w), np.empty(w), np.empty(w)
+    IDX = np.empty(w, np.int64)
+    tn = terrain.shape[0]  # the clamp's bound, as in _terrain_with_slope
+    stride = terrain.shape[1]
+    tflat = terrain.reshape(-1)
+    ax0 = np.empty(w)
+    ay0 = np.empty(w)
+    az0 = np.empty(w)
+    for u in range(w):
+        ax0[u] = rot[0, 0] * ray_a[u]
+        ay0[u] = rot[1, 0] * ray_a[u]
+        az0[u] = rot[2, 0] * ray_a[u]
+    todo = np.empty(w, np.int64)  # the row's pixels in work: u (mip level, maybe lobe) or -1 - u (lobe only)
+    ox, oy, oz = origin[0], origin[1], origin[2]
+    r02, r12, r22 = rot[0, 2], rot[1, 2], rot[2, 2]
+    for v in range(h):
+        b0, b1, b2 = rot[0, 1] * ray_b[v], rot[1, 1] * ray_b[v], rot[2, 1] * ray_b[v]
+        X, Y, Z = buf[0], buf[1], buf[2]
+        DX, DY, DZ = buf[3], buf[4], buf[5]
+        NORM, DIST = buf[6], buf[7]
+        drow = depth[v]
+        # stage 1: ray directions, hit points, viewing distances (every pixel; sky gives inf/nan, never used)
+        for u in range(w):
+            d = np.float64(drow[u])
+            dx = ax0[u] + b0 + r02
+            dy = ay0[u] + b1 + r12
+            dz = az0[u] + b2 + r22
+            DX[u] = dx
+            DY[u] = dy
+            DZ[u] = dz
+            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+            NORM[u] = norm
+            DIST[u] = d * norm
+            X[u] = ox + d * dx
+            Y[u] = oy + d * dy
+            Z[u] = oz + d * dz
+        # stage 2: the pixels either term applies to
+        m = 0
+        for u in range(w):
+            if not drow[u] < 1e30:
+                continue
+            mip = splat_mip and not DIST[u] * DIST[u] < near2
+            if mip or column_gain[u] >= 1.002:
+                todo[m] = u if mip else -1 - u
+                m += 1
+        if m == 0:
+            continue
+        # stage 3: terrain height and slope under each; rock meshes drop out (neither term applies)
+        GX, GY, GR = buf[8], buf[9], buf[10]
+        for i in range(m):
+            t = todo[i]
+            u = t if t >= 0 else -1 - t
+            CX[i] = X[u]
+            CY[i] = Y[u]
+        # _terrain_with_slope in three loops: cell and weights (vector), the four vertices (gather), the blend (vector)
+        for i in range(m):
+            fx = min(max(CX[i] * inv_tcell, 0.0), tn - 1.0001)
+            fy = min(max(CY[i] * inv_tcell, 0.0), tn - 1.0001)
+            c, r = int(fx), int(fy)
+            AX[i] = fx - c
+            AY[i] = fy - r
+            IDX[i] = r * stride + c
+        for i in range(m):
+            j = IDX[i]
+            T00[i] = tflat[j]
+            T01[i] = tflat[j + 1]
+            T10[i] = tflat[j + stride]
+            T11[i] = tflat[j + stride + 1]
+        for i in range(m):
+            ax, ay = AX[i], AY[i]
+            t00, t01, t10, t11 = T00[i], T01[i], T10[i], T11[i]
+            GR[i] = (t00 * (1.0 - ax) + t01 * ax) * (1.0 - ay) + (t10 * (1.0 - ax) + t11 * ax) * ay
+            GX[i] = ((t01 - t00) * (1.0 - ay) + (t11 - t10) * ay) * inv_tcell
+            GY[i] = ((t10 - t00) * (1.0 - ax) + (t11 - t01) * ax) * inv_tcell
+        n = 0
+        for i in range(m):
+            t = todo[i]
+            u = t if t >= 0 else -1 - t
+            todo[n] = t
+            GX[n] = GX[i]
+            GY[n] = GY[i]
+            CX[n] = CX[i]
+            CY[n] = CY[i]
+            n += not Z[u] > GR[i] + rock_above_m  # branch-free: a rock mesh's pixel is overwritten by the next
+        # stage 4: footprint in texels (independent pixels: divisions overlap), then its mip level
+        RATIO = buf[12]
+        for i in range(n):
+            t = todo[i]
+            u = t if t >= 0 else 0
+            gx, gy = GX[i], GY[i]
+            dx, dy, dz = DX[u], DY[u], DZ[u]
+            sin_g = abs(-gx * dx - gy * dy + dz) / (NORM[u] * math.sqrt(gx * gx + gy * gy + 1.0))
+            foot = DIST[u] / (focal_px * max(sin_g, min_sin))
+            RATIO[i] = foot / texel_m if foot > min_foot else 0.0
+        for i in range(n):
+            t = todo[i]
+            if t >= 0 and RATIO[i] > 0.0:
+                RATIO[i] = min(math.log2(RATIO[i]) + lod_bias, lod_max)
+            else:
+                RATIO[i] = 0.0
+        # stage 5: the splat weight at the pixel's mip level and at full resolution, then the colour terms
+        for i in range(n):
+            t = todo[i]
+            u = t if t >= 0 else -1 - t
+            lod = RATIO[i]
+            if lod > 0.0:
+                k = int(lod)
+                f = lod - k
+                qx, qy = CX[i] / texel_m, CY[i] / texel_m
+                blur = _texel_bilinear_scaled(pyr, k, qx, qy)
+                if f > 0.0:
+                    blur = blur * (1.0 - f) + _texel_bilinear_scaled(pyr, k + 1, qx, qy) * f
+                sharp = _texel_bilinear_scaled(pyr, 0, qx, qy)
+                for ch in range(3):
+                    s, r = sand_rgb[ch], rock_rgb[ch]
+                    factor = (blur * s + (1.0 - blur) * r) / (sharp * s + (1.0 - sharp) * r)
+                    img[v, u, ch] = np.uint8(min(img[v, u, ch] * factor + 0.5, 255.0))
+            g = column_gain[u]
+            if g >= 1.002:
+                for ch in range(3):
+                    img[v, u, ch] = np.uint8(min(img[v, u, ch] * g + 0.5, 255.0))

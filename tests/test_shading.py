@@ -86,3 +86,47 @@ def test_backscatter_brightens_the_floor_seen_away_from_the_sun_only():
     gains = shading.backscatter_columns(r.camera((100.0, 100.0, away, 0.0, 0.0))[1], r.ray_a, SUN_AZIMUTH_DEG)
     assert gains[155:165].min() > 1.0 + 0.95 * shading.BACKSCATTER_GAIN  # the middle columns look straight away
     assert gains[0] < 1.01 and gains[-1] < 1.01  # 54 deg to either side: outside the lobe
+
+
+def _poses_on_floor(world, count, seed):
+    rng = np.random.default_rng(seed)
+    rows, cols = np.nonzero(world.nav_truth)
+    pick = rng.integers(0, rows.size, count)
+    return [(cols[i] + 0.5, rows[i] + 0.5, rng.uniform(0, 360), rng.normal(0, 3), rng.normal(0, 3)) for i in pick]
+
+
+def _fused_and_two_pass_frames_are_identical(renderer, poses):
+    for backscatter in (True, False):
+        renderer.backscatter = backscatter
+        for pose in poses:
+            renderer.fused_floor_look = True
+            fused = renderer.render(pose)
+            renderer.fused_floor_look = False
+            two_pass = renderer.render(pose)
+            assert np.array_equal(fused, two_pass), (pose, backscatter, np.abs(fused.astype(int) - two_pass).max())
+    renderer.fused_floor_look = True
+
+
+@pytest.mark.parametrize("name", ["procedural:0", "walled"])
+def test_fused_floor_look_draws_the_bytes_of_the_two_passes(name):
+    """apply_floor_look (one staged pass) against apply_splat_mip then apply_backscatter (the oracle): byte for
+    byte, without cast shadows (both terms, and the mipmaps alone) and with them (the lobe alone)."""
+    from sim.world import load_world
+
+    world = _walled_world() if name == "walled" else load_world(name)
+    poses = _poses_on_floor(world, 4, 3)
+    if name == "walled":
+        poses += [(110.0, 100.0, 0.0, 0.0, 0.0), (112.0, 90.0, 20.0, 2.0, -1.0)]  # facing the dark strip
+    for shadows in (False, True):
+        _fused_and_two_pass_frames_are_identical(Renderer(with_shadows(world, shadows)), poses)
+
+
+def test_fused_floor_look_draws_the_bytes_of_the_two_passes_on_the_real_world(world_dir):
+    """The same on the real world at the logged test_dataset poses (the benchmark's), rough poses added."""
+    from sim.realism import read_test_dataset
+    from sim.world import load_world
+
+    world = load_world("real")
+    frames = read_test_dataset()
+    poses = [frames[i].pose for i in range(0, len(frames), 40)] + _poses_on_floor(world, 4, 5)
+    _fused_and_two_pass_frames_are_identical(Renderer(world), poses)
