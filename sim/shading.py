@@ -166,8 +166,8 @@ def backscatter_columns(rot, ray_a, sun_azimuth_deg: float) -> np.ndarray:
 
     The azimuth is taken at the image's middle row: the rover's pitch and roll move it by well under a
     degree across the rows that show the floor."""
-    dirs = rot[:, 0][None, :] * np.asarray(ray_a)[:, None] + rot[:, 2][None, :]
-    az = np.degrees(np.arctan2(dirs[:, 1], dirs[:, 0]))
+    a = np.asarray(ray_a)
+    az = np.degrees(np.arctan2(rot[1, 0] * a + rot[1, 2], rot[0, 0] * a + rot[0, 2]))
     rel = (az - (sun_azimuth_deg + 180.0 + BACKSCATTER_OFFSET_DEG) + 180.0) % 360.0 - 180.0
     return 1.0 + BACKSCATTER_GAIN * np.exp(-0.5 * (rel / BACKSCATTER_SIGMA_DEG) ** 2)
 
