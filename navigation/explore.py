@@ -266,6 +266,19 @@ def look_targets(unsearched, free, visited, done, dist):
     return _first_per_cluster(rows, cols, lab, d, stats, np.lexsort((d, lab)))
 
 
+def _unsearched_offsets_within(unsearched, pos, radius_m):
+    """(dx, dy) in metres from pos to the centre of every unsearched cell within radius_m: the cells
+    a turn in place at pos could bring into view (face_heading and sweep_direction)."""
+    r = int(np.ceil(radius_m)) + 1
+    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
+    y0, y1 = max(cy - r, 0), min(cy + r + 1, unsearched.shape[0])
+    x0, x1 = max(cx - r, 0), min(cx + r + 1, unsearched.shape[1])
+    rows, cols = np.nonzero(unsearched[y0:y1, x0:x1])
+    dx, dy = cols + x0 + 0.5 - pos[0], rows + y0 + 0.5 - pos[1]
+    near = np.hypot(dx, dy) <= radius_m
+    return dx[near], dy[near]
+
+
 def face_heading(unsearched, pos, yaw_deg):
     """World heading (deg) that puts the most unsearched cells within SEARCH_FACE_RADIUS_M of `pos`
     inside SEARCH_FACE_HALF_FOV_DEG, or None when fewer than SEARCH_FACE_MIN_CELLS would be in view
@@ -276,16 +289,10 @@ def face_heading(unsearched, pos, yaw_deg):
     """
     if not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
         return None
-    r = int(np.ceil(SEARCH_FACE_RADIUS_M)) + 1
-    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
-    y0, y1 = max(cy - r, 0), min(cy + r + 1, unsearched.shape[0])
-    x0, x1 = max(cx - r, 0), min(cx + r + 1, unsearched.shape[1])
-    rows, cols = np.nonzero(unsearched[y0:y1, x0:x1])
-    dx, dy = cols + x0 + 0.5 - pos[0], rows + y0 + 0.5 - pos[1]
-    near = np.hypot(dx, dy) <= SEARCH_FACE_RADIUS_M
-    if near.sum() < SEARCH_FACE_MIN_CELLS:
+    dx, dy = _unsearched_offsets_within(unsearched, pos, SEARCH_FACE_RADIUS_M)
+    if len(dx) < SEARCH_FACE_MIN_CELLS:
         return None
-    bearing = np.degrees(np.arctan2(dy[near], dx[near]))
+    bearing = np.degrees(np.arctan2(dy, dx))
     headings = np.arange(0.0, 360.0, SEARCH_FACE_STEP_DEG)
     off = np.abs((bearing[None, :] - headings[:, None] + 180.0) % 360.0 - 180.0)
     counts = (off <= SEARCH_FACE_HALF_FOV_DEG).sum(axis=1)
@@ -311,15 +318,9 @@ def sweep_direction(unsearched, pos, yaw_deg, target_deg):
     short = 1 if err >= 0 else -1
     if 360.0 - abs(err) > SWEEP_MAX_TURN_DEG or not (np.isfinite(pos[0]) and np.isfinite(pos[1])):
         return short
-    r = int(np.ceil(SWEEP_RADIUS_M)) + 1
-    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
-    y0, y1 = max(cy - r, 0), min(cy + r + 1, unsearched.shape[0])
-    x0, x1 = max(cx - r, 0), min(cx + r + 1, unsearched.shape[1])
-    rows, cols = np.nonzero(unsearched[y0:y1, x0:x1])
-    dx, dy = cols + x0 + 0.5 - pos[0], rows + y0 + 0.5 - pos[1]
-    near = np.hypot(dx, dy) <= SWEEP_RADIUS_M
+    dx, dy = _unsearched_offsets_within(unsearched, pos, SWEEP_RADIUS_M)
     # offset of each cell counter-clockwise from the start heading; the left arc spans [0, left]
-    off = (np.degrees(np.arctan2(dy[near], dx[near])) - float(yaw_deg)) % 360.0
+    off = (np.degrees(np.arctan2(dy, dx)) - float(yaw_deg)) % 360.0
     left = err % 360.0
     h = SWEEP_HALF_FOV_DEG
     only_left = int(((off > h) & (off < left - h)).sum())
