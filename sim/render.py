@@ -78,6 +78,9 @@ SHADOW_STEP_M = 0.2  # march step of the shadow rays baked at load, m
 TEXTURE_AMPLITUDE = 0.45  # relative brightness noise on walls and rocks (not on sand), 0..1
 TEXTURE_CELLS = (400, 1000)  # texture noise octaves: grid sides over the world, cells
 UNDERSIDE_SHADE = 0.45  # darkening of the underside of overhanging rock, 0..1
+UNDERSIDE_BAND_M = 0.3  # banded look (Renderer.smooth_underside False): that darkening within this of the bottom, m
+UNDERSIDE_RAMP_M = 1.0  # smooth look: the darkening fades linearly over this height above the rock's bottom, m
+UNDERSIDE_BLUR_M = 0.4  # smooth look: overhang colours averaged across neighbouring 0.1 m columns (Gaussian sigma), m
 DIST_DARKEN = 0.17  # fraction of brightness lost far away (real sand 242 -> 202 at 30 m)
 DIST_SCALE_M = 8.0  # e-folding distance of that darkening, m
 
@@ -234,6 +237,12 @@ def bake_rasters(world: World):
     rock_rgb = np.array(ROCK_RGB, np.float32) * (1.0 + TEXTURE_AMPLITUDE * noise)[..., None]
     colour_rock = np.clip(rock_rgb * sun_shade(top)[..., None], 0, 255).astype(np.uint8)
     colour_rock = np.where(has_rock[..., None], colour_rock, colour_ground)
+    rock64 = pack_rgb(colour_rock)
+    # rock whose mesh bottom is off the ground overhangs (drawn with a gap over low floor, solid elsewhere)
+    overhang = has_rock & (rock_bottom > ground + GAP_MIN_M)
+    overhang_rc = np.nonzero(overhang)
+    rock64_banded_overhang = rock64[overhang_rc].copy()  # the overhangs' per-column colours (the banded look's)
+    rock64[overhang_rc] = pack_rgb(_smooth_over(colour_rock, overhang, UNDERSIDE_BLUR_M / cell)[overhang_rc])
     kc = int(round(COARSE_CELL_M / cell))
     # the kernel marches the terrain on its own grid: bound each coarse cell by that grid's vertices
     tmax, tmin = _terrain_cell_range(world.terrain_height, world.terrain_cell_m, COARSE_CELL_M,
@@ -249,12 +258,33 @@ def bake_rasters(world: World):
     # the four per-cell figures the kernel reads on entering a coarse cell, side by side (one cache line)
     coarse = np.stack([cmax, cground, cbottom, cflat], axis=-1).astype(np.float32)
     return {"cflat": cflat, "coarse": coarse, "bmax": _block_max(cmax, BLOCK_CELLS),
-            **_kernel_rasters(ground, slab_lo, slab_hi, colour_ground), "rock64": pack_rgb(colour_rock),
+            **_kernel_rasters(ground, slab_lo, slab_hi, colour_ground), "rock64": rock64,
+            "overhang_rc": overhang_rc, "rock64_banded_overhang": rock64_banded_overhang,
             "top": top, "ground": ground.astype(np.float32), "slab_lo": slab_lo, "slab_hi": slab_hi,
             "has_gap": has_gap, "colour": colour_ground, "colour_rock": colour_rock, "cmax": cmax,
             "cground": cground, "cbottom": cbottom,
             "sand": sand.astype(np.float32), "shadow": shadow.astype(np.float32),
             "has_rock": has_rock, "light": light.astype(np.float32), "sun": sun}
+
+
+def _smooth_over(rgb: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.ndarray:
+    """uint8 colours Gaussian-averaged over the `mask` cells only (normalised convolution), so the
+    overhang's 0.1 m columns, whose sides show one colour each from top to bottom, do not read as
+    vertical bands; cells outside the mask keep their colour."""
+    out = rgb.copy()
+    rows, cols = np.nonzero(mask)
+    if rows.size == 0:
+        return out
+    pad = int(math.ceil(4 * sigma_px))  # only the overhangs' bounding box is filtered
+    r0, r1 = max(rows.min() - pad, 0), min(rows.max() + pad + 1, mask.shape[0])
+    c0, c1 = max(cols.min() - pad, 0), min(cols.max() + pad + 1, mask.shape[1])
+    wb = mask[r0:r1, c0:c1].astype(np.float32)
+    den = cv2.GaussianBlur(wb, (0, 0), sigma_px)
+    for ch in range(3):
+        num = cv2.GaussianBlur(rgb[r0:r1, c0:c1, ch].astype(np.float32) * wb, (0, 0), sigma_px)
+        sm = np.clip(num / np.maximum(den, 1e-6) + 0.5, 0, 255).astype(np.uint8)
+        out[r0:r1, c0:c1, ch] = np.where(wb > 0, sm, rgb[r0:r1, c0:c1, ch])
+    return out
 
 
 def _shadow_factor(world: World) -> float:
@@ -459,7 +489,7 @@ def _spread(c):
 def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u, slab, rock64, coarse,
                    bmax, block_m, cell, coarse_m, origin,
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
-                   underside_shade, world_size, dark_lut, dark_lut_step, share_depth_m, share_ratio,
+                   underside_shade, underside_band_m, underside_ramp_m, world_size, dark_lut, dark_lut_step, share_depth_m, share_ratio,
                    share_levels, col_order, col_offset):
     """Column-wise raymarch into row-major (H, W, 3) image and (H, W) depth (module docstring).
 
@@ -726,8 +756,13 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                 else:  # rock slab: nearest cell, darker on the underside of an overhang
                     rr = _nearest(n, inv_cell, y)
                     cc = _nearest(n, inv_cell, x)
-                    if -1e8 < slab[rr, cc, SLAB_LO] < 1e8 and z < slab[rr, cc, SLAB_LO] + 0.3:
-                        shade *= underside_shade
+                    lo_r = slab[rr, cc, SLAB_LO]
+                    if -1e8 < lo_r < 1e8:
+                        if underside_ramp_m > 0.0:  # smooth: by the hit's height above the bottom
+                            t = min(max((z - lo_r) / underside_ramp_m, 0.0), 1.0)
+                            shade *= underside_shade + (1.0 - underside_shade) * t
+                        elif z < lo_r + underside_band_m:
+                            shade *= underside_shade
                     acc = rock64[rr, cc] * int(wscale * shade + 0.5) + rounding
                 img[v, u, 0] = (acc >> WEIGHT_BITS) & lane_mask
                 img[v, u, 1] = (acc >> (WEIGHT_BITS + LANE_BITS)) & lane_mask
@@ -832,6 +867,8 @@ class Renderer:
         self._splat_mip = None if world.cast_shadows else _splat_mip(world)  # (weight mipmaps, texel m)
         self.backscatter = True  # the floor's bright lobe away from the sun (sim/shading.py); False: plain Lambert
         self.fused_floor_look = True  # False: far floor and lobe drawn by the two separate passes (the test oracle)
+        self.smooth_underside = True  # False: overhangs as before issue 28 item 4 (one colour per 0.1 m column, a 0.3 m dark band)
+        self._rock64_banded = None  # the packed rock colours of that look, built on first use
         from sim.shading import ROCK_LAYER_RGB
 
         self._sand_rgb_f64 = np.array(SAND_LUT_RGB[-1], np.float64)  # pure sand's colour, the splat map's bright end
@@ -848,6 +885,15 @@ class Renderer:
         self._params = np.zeros((0, 8))  # their _sample_params rows
         az, el = math.radians(SUN_AZIMUTH_DEG), math.radians(SUN_ELEVATION_DEG)
         self._sun = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+
+    def _rock64(self) -> np.ndarray:
+        """Packed rock colours: overhang columns smoothed across neighbours, or per column (banded look)."""
+        if self.smooth_underside:
+            return self.baked["rock64"]
+        if self._rock64_banded is None:
+            self._rock64_banded = self.baked["rock64"].copy()
+            self._rock64_banded[self.baked["overhang_rc"]] = self.baked["rock64_banded_overhang"]
+        return self._rock64_banded
 
     def camera(self, pose):
         """(origin xyz in world, 3x3 rotation whose columns are right/up/forward) for a pose."""
@@ -875,10 +921,11 @@ class Renderer:
         terrain = self._terrain
         _render_kernel(img, depth, np.ascontiguousarray(rot), self.ray_a, self.ray_b, terrain, 1.0 / float(self.world.terrain_cell_m), b["tex"],
                        b["tex_u"],
-                       b["slab"], b["rock64"], b["coarse"], b["bmax"],
+                       b["slab"], self._rock64(), b["coarse"], b["bmax"],
                        BLOCK_CELLS * COARSE_CELL_M, float(self.world.rock_cell_m), COARSE_CELL_M,
                        origin, FAR_M, FINE_STEP_MIN_M, FINE_STEP_PER_M, REFINE_ITERS, self.zmax,
-                       self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, float(self.world.size_m),
+                       self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, UNDERSIDE_BAND_M,
+                       UNDERSIDE_RAMP_M if self.smooth_underside else 0.0, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
                        COLUMN_SHARE_LEVELS, self._col_order, self._col_offset)
         if self._splat_mip is not None or self.backscatter:
