@@ -80,38 +80,46 @@ def splat_pyramid(sand_weight: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _texel_bilinear(pyr, k, texel_m, x, y):
-    n = pyr.shape[1] >> k
-    t = texel_m * (1 << k)
-    fx = min(max(x / t - 0.5, 0.0), n - 1.0001)
-    fy = min(max(y / t - 0.5, 0.0), n - 1.0001)
+def _clamped_cell(n, fx, fy):
+    """(c, r, ax, ay): the cell of an n x n vertex grid that holds grid point (fx, fy), clamped into the grid,
+    and the point's offsets inside it - the one clamp every bilinear lookup here shares."""
+    fx = min(max(fx, 0.0), n - 1.0001)
+    fy = min(max(fy, 0.0), n - 1.0001)
     c, r = int(fx), int(fy)
-    ax, ay = fx - c, fy - r
-    return ((pyr[k, r, c] * (1.0 - ax) + pyr[k, r, c + 1] * ax) * (1.0 - ay)
-            + (pyr[k, r + 1, c] * (1.0 - ax) + pyr[k, r + 1, c + 1] * ax) * ay)
+    return c, r, fx - c, fy - r
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _blend(v00, v01, v10, v11, ax, ay):
+    """Bilinear blend of a cell's four vertex values (row 0 then row 1) at offsets (ax, ay)."""
+    return (v00 * (1.0 - ax) + v01 * ax) * (1.0 - ay) + (v10 * (1.0 - ax) + v11 * ax) * ay
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pyramid_cell_value(pyr, k, fx, fy):
+    """Bilinear value of mip level k at its own grid coordinates (fx, fy), clamped."""
+    c, r, ax, ay = _clamped_cell(pyr.shape[1] >> k, fx, fy)
+    return _blend(pyr[k, r, c], pyr[k, r, c + 1], pyr[k, r + 1, c], pyr[k, r + 1, c + 1], ax, ay)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _texel_bilinear(pyr, k, texel_m, x, y):
+    t = texel_m * (1 << k)
+    return _pyramid_cell_value(pyr, k, x / t - 0.5, y / t - 0.5)
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _terrain_bilinear(terrain, inv_cell, x, y):
-    n = terrain.shape[0]
-    fx = min(max(x * inv_cell, 0.0), n - 1.0001)
-    fy = min(max(y * inv_cell, 0.0), n - 1.0001)
-    c, r = int(fx), int(fy)
-    ax, ay = fx - c, fy - r
-    return ((terrain[r, c] * (1.0 - ax) + terrain[r, c + 1] * ax) * (1.0 - ay)
-            + (terrain[r + 1, c] * (1.0 - ax) + terrain[r + 1, c + 1] * ax) * ay)
+    c, r, ax, ay = _clamped_cell(terrain.shape[0], x * inv_cell, y * inv_cell)
+    return _blend(terrain[r, c], terrain[r, c + 1], terrain[r + 1, c], terrain[r + 1, c + 1], ax, ay)
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _terrain_with_slope(terrain, inv_cell, x, y):
     """(height, dh/dx, dh/dy) of the bilinear terrain at (x, y), from one cell's four vertices."""
-    n = terrain.shape[0]
-    fx = min(max(x * inv_cell, 0.0), n - 1.0001)
-    fy = min(max(y * inv_cell, 0.0), n - 1.0001)
-    c, r = int(fx), int(fy)
-    ax, ay = fx - c, fy - r
+    c, r, ax, ay = _clamped_cell(terrain.shape[0], x * inv_cell, y * inv_cell)
     t00, t01, t10, t11 = terrain[r, c], terrain[r, c + 1], terrain[r + 1, c], terrain[r + 1, c + 1]
-    h = (t00 * (1.0 - ax) + t01 * ax) * (1.0 - ay) + (t10 * (1.0 - ax) + t11 * ax) * ay
+    h = _blend(t00, t01, t10, t11, ax, ay)
     gx = ((t01 - t00) * (1.0 - ay) + (t11 - t10) * ay) * inv_cell
     gy = ((t10 - t00) * (1.0 - ax) + (t11 - t01) * ax) * inv_cell
     return h, gx, gy
@@ -197,14 +205,8 @@ def apply_backscatter(img, depth, origin, rot, ray_a, ray_b, column_gain, terrai
 def _texel_bilinear_scaled(pyr, k, qx, qy):
     """`_texel_bilinear` from the point in level-0 texels (qx, qy = x / texel_m, y / texel_m): the same value, as
     x / (texel_m * 2**k) == (x / texel_m) * 2**-k exactly (scaling by a power of two commutes with rounding)."""
-    n = pyr.shape[1] >> k
     scale = 1.0 / (1 << k)
-    fx = min(max(qx * scale - 0.5, 0.0), n - 1.0001)
-    fy = min(max(qy * scale - 0.5, 0.0), n - 1.0001)
-    c, r = int(fx), int(fy)
-    ax, ay = fx - c, fy - r
-    return ((pyr[k, r, c] * (1.0 - ax) + pyr[k, r, c + 1] * ax) * (1.0 - ay)
-            + (pyr[k, r + 1, c] * (1.0 - ax) + pyr[k, r + 1, c + 1] * ax) * ay)
+    return _pyramid_cell_value(pyr, k, qx * scale - 0.5, qy * scale - 0.5)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
