@@ -490,7 +490,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                    bmax, block_m, cell, coarse_m, origin,
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, underside_band_m, underside_ramp_m, world_size, dark_lut, dark_lut_step, share_depth_m, share_ratio,
-                   share_levels, col_order, col_offset):
+                   share_levels, col_order, col_offset, shared_px):
     """Column-wise raymarch into row-major (H, W, 3) image and (H, W) depth (module docstring).
 
     Free space is skipped per block_m block (above everything in it) and per coarse_m cell
@@ -555,6 +555,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                     d_mid = 0.5 * (d_l + d_r)
                     depth[v, u] = d_mid
                     hit_kind[v, u] = 1
+                    shared_px[v, u] = 1
                     # the ray above restarts short of both neighbours' hits: the average may lie past a
                     # ridge this column's ray would have met first
                     prev_s = (1.0 - share_ratio) * min(d_l, d_r) / table[3, v]
@@ -783,6 +784,23 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                 prev_s = far_m
 
 
+@njit(cache=True, nogil=True)
+def _fill_shared_pixels(img, shared_px, col_order, col_offset):
+    """Each pixel the raymarch averaged from its two neighbouring columns (shared_px 1) becomes the average of
+    those neighbours again, after the floor look has been drawn on the marched pixels only: the look's
+    factors change slowly from column to column, so this costs far less than computing them again.
+    Columns go in the raymarch's order, so a column's neighbours are final before it is filled."""
+    h_img = img.shape[0]
+    for u in col_order:
+        off = col_offset[u]
+        if off == 0:
+            continue
+        for v in range(h_img):
+            if shared_px[v, u]:
+                for ch in range(3):
+                    img[v, u, ch] = (np.uint16(img[v, u - off, ch]) + np.uint16(img[v, u + off, ch]) + 1) >> 1
+
+
 def _kernel_rasters(ground, slab_lo, slab_hi, colour_ground) -> dict:
     """The baked rasters as the kernel reads them. "tex": float32 (n, n, 2) the 0.1 m ground resample and
     its colour (0xBBGGRR bits) side by side, so a hit's placement and its colour read the same cache
@@ -874,8 +892,10 @@ class Renderer:
         self._sand_rgb_f64 = np.array(SAND_LUT_RGB[-1], np.float64)  # pure sand's colour, the splat map's bright end
         self._rock_layer_rgb_f64 = np.array(ROCK_LAYER_RGB, np.float64)
         self.column_share_m = COLUMN_SHARE_MAX_M  # 0: every column marched (the reference image)
+        self.share_floor_look = True  # False: the floor look is computed on the shared pixels too (the older image)
         self._col_order, self._col_offset = column_plan(IMAGE_W, COLUMN_SHARE_TIERS)
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
+        self.last_shared = np.zeros((IMAGE_H, IMAGE_W), np.uint8)
         self._last_camera = None
         self._terrain = np.ascontiguousarray(world.terrain_height, dtype=np.float32)
         self._tread = None  # tyre-track tread mask, loaded with the first tracks drawn
@@ -917,6 +937,7 @@ class Renderer:
         origin, rot = self.camera(pose)
         img = np.empty((IMAGE_H, IMAGE_W, 3), np.uint8)
         depth = np.empty((IMAGE_H, IMAGE_W), np.float32)
+        shared_px = np.zeros((IMAGE_H, IMAGE_W), np.uint8)  # 1 where the kernel averaged the two neighbours
         b = self.baked
         terrain = self._terrain
         _render_kernel(img, depth, np.ascontiguousarray(rot), self.ray_a, self.ray_b, terrain, 1.0 / float(self.world.terrain_cell_m), b["tex"],
@@ -927,17 +948,22 @@ class Renderer:
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, UNDERSIDE_BAND_M,
                        UNDERSIDE_RAMP_M if self.smooth_underside else 0.0, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
-                       COLUMN_SHARE_LEVELS, self._col_order, self._col_offset)
+                       COLUMN_SHARE_LEVELS, self._col_order, self._col_offset, shared_px)
         if self._splat_mip is not None or self.backscatter:
-            self._draw_floor_look(img, depth, origin, np.ascontiguousarray(rot))
+            if self.share_floor_look and self.column_share_m > 0.0:
+                self._draw_floor_look(img, depth, origin, np.ascontiguousarray(rot), shared_px)
+                _fill_shared_pixels(img, shared_px, self._col_order, self._col_offset)
+            else:
+                self._draw_floor_look(img, depth, origin, np.ascontiguousarray(rot), np.zeros_like(shared_px))
         if tracks is not None:
             self.draw_tracks(img, depth, origin, rot, tracks)
         self.draw_samples(img, depth, origin, rot, samples)
         self.last_depth = depth  # distance along the ray / |forward|, inf for sky
+        self.last_shared = shared_px  # 1 where the pixel is the average of its two neighbouring columns
         self._last_camera = (origin, rot)
         return img
 
-    def _draw_floor_look(self, img, depth, origin, rot):
+    def _draw_floor_look(self, img, depth, origin, rot, skip):
         """The shadowless far floor (splat mipmaps) and the back-scatter lobe (sim/shading.py), in place."""
         from sim import shading
 
@@ -958,7 +984,7 @@ class Renderer:
         shading.apply_floor_look(img, depth, origin, rot, self.ray_a, self.ray_b, pyr, texel_m, FOCAL_PX, terrain,
                                  inv_tcell, sand, rock, shading.SPLAT_LOD_BIAS, shading.SPLAT_LOD_MAX,
                                  shading.SPLAT_MIN_SIN, shading.ROCK_HIT_ABOVE_GROUND_M,
-                                 gain if gain is not None else _NO_GAIN, self._splat_mip is not None)
+                                 gain if gain is not None else _NO_GAIN, self._splat_mip is not None, skip)
 
     @property
     def last_hit(self) -> np.ndarray:

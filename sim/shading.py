@@ -211,7 +211,7 @@ def _texel_bilinear_scaled(pyr, k, qx, qy):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_px, terrain, inv_tcell,
-                     sand_rgb, rock_rgb, lod_bias, lod_max, min_sin, rock_above_m, column_gain, splat_mip):
+                     sand_rgb, rock_rgb, lod_bias, lod_max, min_sin, rock_above_m, column_gain, splat_mip, skip):
     """`apply_splat_mip` (when splat_mip) then `apply_backscatter` in one pass, in place: the same pixels and the
     same arithmetic on each, so the same bytes (tests/test_shading.py holds it to the two passes as the oracle).
 
@@ -219,7 +219,9 @@ def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_
     the work goes row by row in stages (directions and hit points for the whole row; the pixels either term
     applies to; their terrain cells, vertices and slopes; footprints; mip levels; colours), so the compiler
     vectorises the branch-free ones and the divisions of independent pixels overlap; Python's zero-division
-    checks are off (error_model="numpy": no divisor here is 0 for a pixel that is used)."""
+    checks are off (error_model="numpy": no divisor here is 0 for a pixel that is used).
+    skip: (H, W) uint8, pixels left as they are (1; the renderer fills the ones its raymarch took from the two
+    neighbouring columns from those columns afterwards), or all 0."""
     h, w = depth.shape
     min_foot = texel_m
     near2 = min_foot * focal_px * MIN_FOOT_HEIGHT_M
@@ -246,6 +248,7 @@ def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_
         DX, DY, DZ = buf[3], buf[4], buf[5]
         NORM, DIST = buf[6], buf[7]
         drow = depth[v]
+        srow = skip[v]
         # stage 1: ray directions, hit points, viewing distances (every pixel; sky gives inf/nan, never used)
         for u in range(w):
             d = np.float64(drow[u])
@@ -264,7 +267,7 @@ def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_
         # stage 2: the pixels either term applies to
         m = 0
         for u in range(w):
-            if not drow[u] < 1e30:
+            if not drow[u] < 1e30 or srow[u]:
                 continue
             mip = splat_mip and not DIST[u] * DIST[u] < near2
             if mip or column_gain[u] >= 1.002:

@@ -130,3 +130,30 @@ def test_fused_floor_look_draws_the_bytes_of_the_two_passes_on_the_real_world(wo
     frames = read_test_dataset()
     poses = [frames[i].pose for i in range(0, len(frames), 40)] + _poses_on_floor(world, 4, 5)
     _fused_and_two_pass_frames_are_identical(Renderer(world), poses)
+
+
+@pytest.mark.parametrize("shadows", [False, True])
+def test_floor_look_on_marched_pixels_then_filled_keeps_marched_pixels_and_nearly_the_shared_ones(shadows):
+    """Renderer.share_floor_look: the floor look is drawn on the marched pixels only and each pixel the raymarch
+    took from its two neighbouring columns is their average again. The marched pixels keep their bytes, the
+    shared ones stay within a few levels of the look computed on them (the look changes slowly across columns),
+    and the navigable mask is all but the same."""
+    from sim.world import load_world
+
+    world = with_shadows(load_world("procedural:0"), shadows)
+    shared, every = Renderer(world), Renderer(world)
+    every.share_floor_look = False
+    filled = 0
+    for pose in _poses_on_floor(world, 6, 21):
+        a, b = shared.render(pose), every.render(pose)
+        mask = shared.last_shared.astype(bool)
+        assert np.array_equal(mask, every.last_shared.astype(bool))  # the raymarch itself is the same
+        assert np.array_equal(a[~mask], b[~mask]), pose
+        diff = np.abs(a.astype(int) - b.astype(int)).max(axis=2)[mask]
+        filled += mask.sum()
+        # (the few large ones: a shared pixel on a ridge whose averaged hit lies above the ground, where the look
+        # computed on it leaves it alone)
+        assert (diff <= 2).mean() >= 0.95 and (diff <= 16).mean() >= 0.995, (pose, np.percentile(diff, [50, 99, 100]))
+        nav_a, nav_b = np.all(a > 160, axis=2), np.all(b > 160, axis=2)
+        assert (nav_a == nav_b).mean() >= 0.999, pose
+    assert filled > 6 * 10_000  # the fill is exercised: most of the floor is shared
