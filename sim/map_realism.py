@@ -8,7 +8,7 @@ navigable).  Each figure is given over all frames and over the frames where the 
 places side by side (real map | twin map | disagreement) and metrics.json lists them.
 
     python -m sim.map_realism [--log megalphian|test_dataset|PATH] [--stride 2]
-                              [--shadows off|on|both] [--tracks on|off] [--out out/map-realism]
+                              [--shadows auto|off|on|both] [--tracks on|off] [--out out/map-realism]
 
 Tyre tracks are drawn into the twin frames along the replayed trajectory, as in the real frames.
 """
@@ -179,8 +179,9 @@ def main(argv=None) -> int:
     p.add_argument("--log", default=DEFAULT_LOG, help="test_dataset, a real-logs folder name, a log folder or csv")
     p.add_argument("--stride", type=int, default=DEFAULT_STRIDE, help="use every N-th frame")
     p.add_argument("--out", default="out/map-realism", help="folder for metrics.json and the map images")
-    p.add_argument("--shadows", choices=("off", "on", "both"), default="off",
-                   help="twin cast shadows: off (default, as most real drives), on (as test_dataset) or both")
+    p.add_argument("--shadows", choices=("auto", "off", "on", "both"), default="auto",
+                   help="twin cast shadows: auto (default: as the log's frames show), off (megalphian), "
+                        "on (test_dataset, dimaga, royalejandro) or both")
     p.add_argument("--tracks", choices=("on", "off"), default="on",
                    help="draw tyre tracks along the replayed drive (on, as the real frames show them)")
     a = parse_with_logging(p, argv)
@@ -194,12 +195,14 @@ def main(argv=None) -> int:
     from replay.outputs import map_image, write_json, write_png
 
     out = Path(a.out)
-    settings = ("off", "on") if a.shadows == "both" else (a.shadows,)
     payload = {"stride": a.stride, "tracks": a.tracks, "moving_min_speed_m_s": MOVING_MIN_SPEED}
     try:
         log_path = find_log(a.log)
         payload["log"] = str(log_path)
         world = load_real_world()
+        from sim.realism import shadow_settings
+
+        settings = shadow_settings(a.shadows, log_path, world)
         truth = load_ground_truth(shared_data.ground_truth_map_path())
         results = {}
         for setting in settings:

@@ -7,7 +7,7 @@ within 5 m of the rover and over the whole warped view.  Figures are given over 
 and over the frames where the rover moves (|speed| >= MOVING_MIN_SPEED; keys with `moving`
 in metrics.json), per shadows setting, with side-by-side images of the worst places.
 
-    python -m sim.realism [--log test_dataset|NAME|PATH] [--stride 1] [--shadows off|on|both]
+    python -m sim.realism [--log test_dataset|NAME|PATH] [--stride 1] [--shadows auto|off|on|both]
                           [--tracks on|off] [--out out/realism] [--examples 6]
 
 Tyre tracks are drawn along the replayed trajectory (on by default), as the real simulator drew
@@ -50,6 +50,14 @@ FLOOR_MOVING_WHOLE_MEAN = 0.80  # mean IoU over the whole view, moving frames
 MOVING_MIN_SPEED = 0.2  # m/s, a frame counts as moving at or above this |speed|
 DEFAULT_EXAMPLES = 6  # side-by-side images of the worst places written per shadows setting
 WORST_PLACE_SEPARATION_M = 3.0  # worst frames closer than this to an already chosen one are skipped
+# --shadows auto: which quality level a log was recorded at, from its frames (sim/shading.py item 4)
+DETECT_FRAMES = 40  # moving frames sampled, evenly over the log, count
+DETECT_RADIUS_M = 6.0  # floor pixels within this horizontal distance of the rover are compared, m
+DETECT_MIN_SAND = 0.95  # ... on pure sand only (sand weight at least this), 0..1
+DETECT_SHADOWED = 0.3  # the baked shadow raster at least this: floor a cast shadow would cover, 0..1
+DETECT_SUNLIT = 0.02  # ... at most this: floor no shadow reaches, 0..1
+DETECT_RATIO = 0.92  # cast shadows when shadowed / sunlit floor (median darkest channel) is below this
+DETECT_MIN_PIXELS = 300  # fewer shadowed or sunlit pixels than this: too little evidence, shadows off, count
 # standard calibration (camera.json standard_perspective_calibration), used when ../shared is absent
 STANDARD_SOURCE_PX = [[14, 140], [301, 140], [200, 96], [118, 96]]
 STANDARD_DESTINATION_PX = [[155, 154], [165, 154], [165, 144], [155, 144]]
@@ -105,6 +113,50 @@ def replay_tracks(frames: list, keep, world) -> dict:
     from sim.tracks import replay_quads
 
     return dict(replay_quads([f.pose[:3] for f in frames], [f.time for f in frames], world, keep))
+
+
+def detect_shadows(frames: list, world) -> tuple:
+    """(cast shadows?, shadowed / sunlit brightness ratio or None): whether a log's real frames show the terrain's
+    cast shadows. Real frames of the quality levels with shadows read 0.85 of the sunlit floor where the twin's
+    shadow raster marks shadow (dimaga, royalejandro, test_dataset); without, 0.99 (megalphian)."""
+    from sim.render import Renderer
+
+    moving = [f for f in frames if f.moving] or list(frames)
+    picked = [moving[int(k)] for k in np.linspace(0, len(moving) - 1, min(DETECT_FRAMES, len(moving)))] if moving else []
+    renderer = Renderer(world)
+    raster = renderer.baked["shadow"]
+    n = raster.shape[0] - 1
+    shadowed, sunlit = [], []
+    for f in picked:
+        renderer.render(f.pose)
+        hit = renderer.last_hit.reshape(-1, 3).astype(np.float64)
+        ok = np.isfinite(hit[:, 0])
+        hit = hit[ok]
+        ok_floor = (np.hypot(hit[:, 0] - f.pose[0], hit[:, 1] - f.pose[1]) <= DETECT_RADIUS_M) \
+            & (hit[:, 2] <= world.height_at(hit[:, 0], hit[:, 1]) + 0.05) & (world.sand_at(hit[:, 0], hit[:, 1]) >= DETECT_MIN_SAND)
+        cell = world.rock_cell_m
+        sh = raster[np.clip(np.rint(hit[:, 1] / cell).astype(int), 0, n), np.clip(np.rint(hit[:, 0] / cell).astype(int), 0, n)]
+        darkest = read_rgb(f.image_path).min(axis=2).reshape(-1)[ok]
+        shadowed.append(darkest[ok_floor & (sh >= DETECT_SHADOWED)])
+        sunlit.append(darkest[ok_floor & (sh <= DETECT_SUNLIT)])
+    shadowed = np.concatenate(shadowed) if shadowed else np.zeros(0)
+    sunlit = np.concatenate(sunlit) if sunlit else np.zeros(0)
+    if shadowed.size < DETECT_MIN_PIXELS or sunlit.size < DETECT_MIN_PIXELS:
+        return False, None
+    ratio = float(np.median(shadowed)) / max(float(np.median(sunlit)), 1.0)
+    return ratio < DETECT_RATIO, ratio
+
+
+def shadow_settings(choice: str, log_path, world) -> tuple:
+    """The shadows settings to measure for a --shadows choice: off, on, both, or auto (detected from the log)."""
+    if choice == "both":
+        return ("off", "on")
+    if choice == "auto":
+        on, ratio = detect_shadows(read_frames(log_path), world)
+        log.info("shadows auto: %s (shadowed / sunlit floor %s)", "on" if on else "off",
+                 "unknown" if ratio is None else f"{ratio:.2f}")
+        return ("on",) if on else ("off",)
+    return (choice,)
 
 
 def standard_warp():
@@ -284,8 +336,9 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m sim.realism", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--log", default="test_dataset", help="test_dataset, a real-logs folder name, a log folder or csv")
     parser.add_argument("--stride", type=int, default=1, help="use every N-th frame")
-    parser.add_argument("--shadows", choices=("off", "on", "both"), default="off",
-                        help="twin cast shadows: off (default, as most real drives), on (as test_dataset) or both")
+    parser.add_argument("--shadows", choices=("auto", "off", "on", "both"), default="auto",
+                        help="twin cast shadows: auto (default: as the log's frames show), off (megalphian), "
+                             "on (test_dataset, dimaga, royalejandro) or both")
     parser.add_argument("--tracks", choices=("on", "off"), default="on",
                         help="draw tyre tracks along the replayed drive (on, as the real frames show them)")
     parser.add_argument("--out", default="out/realism", help="folder for side-by-side images and metrics")
@@ -302,7 +355,7 @@ def main(argv=None):
     try:
         log_path = find_log(args.log)
         world = load_real_world()
-        settings = ("off", "on") if args.shadows == "both" else (args.shadows,)
+        settings = shadow_settings(args.shadows, log_path, world)
         out = Path(args.out)
         results = {s: measure(log_path, with_shadows(world, s == "on"), args.stride, args.examples, out, progress=True,
                                 tracks=args.tracks == "on")

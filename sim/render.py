@@ -71,7 +71,7 @@ SKY_RGB = (126, 117, 112)  # sky, uint8 RGB (real median)
 FAR_RGB = (126, 117, 112)  # rays beyond FAR_M, uint8 RGB
 SUN_AZIMUTH_DEG = 295.0  # direction the sunlight comes FROM, degrees CCW from +x (fitted)
 SUN_ELEVATION_DEG = 60.0  # sun elevation above the horizon, degrees (fitted)
-SHADOW_FACTOR = 0.6  # brightness of cast shadow relative to sunlit, 0..1
+SHADOW_FACTOR = 0.6  # the first cast-shadow look's shadow brightness (now sim/shading.py CAST_SHADOW_FACTOR), 0..1
 SHADOW_BLUR_M = 1.5  # soft shadow edge (Gaussian sigma; fitted, real edges are wide penumbrae), m
 SLOPE_SHADE = 0.7  # how strongly faces turned from the sun darken (0 = flat look)
 SHADOW_STEP_M = 0.2  # march step of the shadow rays baked at load, m
@@ -231,7 +231,10 @@ def bake_rasters(world: World):
                            interpolation=cv2.INTER_CUBIC) for cells in TEXTURE_CELLS) / len(TEXTURE_CELLS)
     rough = 1.0 + TEXTURE_AMPLITUDE * noise * np.clip((0.7 - sand) / 0.4, 0.0, 1.0)
     # terrain colour everywhere (what a ray hitting the ground sees), bilinear in the kernel
-    light = sun_shade(ground) * (1.0 - (1.0 - _shadow_factor(world)) * shadow)
+    from sim.shading import cast_shadow_cover
+
+    cover = cast_shadow_cover(shadow) if world.cast_shadows else shadow
+    light = sun_shade(ground) * (1.0 - (1.0 - _shadow_factor(world)) * cover)
     colour_ground = np.clip(ground_rgb * (rough * light)[..., None], 0, 255).astype(np.uint8)
     # rock colour (what a ray hitting a rock slab sees), nearest cell in the kernel
     rock_rgb = np.array(ROCK_RGB, np.float32) * (1.0 + TEXTURE_AMPLITUDE * noise)[..., None]
@@ -290,11 +293,9 @@ def _smooth_over(rgb: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.ndarr
 def _shadow_factor(world: World) -> float:
     """Brightness of the floor the terrain hides from the sun: cast shadows (test_dataset's quality
     level), or the weaker darkening the drives without cast shadows show (sim/shading.py)."""
-    if world.cast_shadows:
-        return SHADOW_FACTOR
-    from sim.shading import SHADOWLESS_SHADOW_FACTOR
+    from sim.shading import CAST_SHADOW_FACTOR, SHADOWLESS_SHADOW_FACTOR
 
-    return SHADOWLESS_SHADOW_FACTOR
+    return CAST_SHADOW_FACTOR if world.cast_shadows else SHADOWLESS_SHADOW_FACTOR
 
 
 def _coarse_max(top: np.ndarray, k: int) -> np.ndarray:
@@ -881,8 +882,9 @@ class Renderer:
         self.ray_b = ((CY - (np.arange(IMAGE_H) + 0.5)) / FOCAL_PX).astype(np.float64)
         self.sky_rgb = np.array(SKY_RGB, np.uint8)
         self.far_rgb = np.array(FAR_RGB, np.uint8)
-        self._dark_lut = _darkening_lut(bool(world.cast_shadows))
-        self._splat_mip = None if world.cast_shadows else _splat_mip(world)  # (weight mipmaps, texel m)
+        # the far floor is drawn by the splat mipmaps at both quality levels (sim/shading.py items 1 and 4)
+        self._dark_lut = _darkening_lut(False)
+        self._splat_mip = _splat_mip(world)  # (weight mipmaps, texel m)
         self.backscatter = True  # the floor's bright lobe away from the sun (sim/shading.py); False: plain Lambert
         self.fused_floor_look = True  # False: far floor and lobe drawn by the two separate passes (the test oracle)
         self.smooth_underside = True  # False: overhangs as before issue 28 item 4 (one colour per 0.1 m column, a 0.3 m dark band)

@@ -192,8 +192,8 @@ def test_calibration_grid_matches_standard_points(flat_renderer):
 def test_shadows_off_lights_the_shadowed_floor():
     """--shadows off (Fastest/Fast quality) brightens exactly the floor the terrain shadows, to the weak
     darkening the shadowless real drives show there (sim/shading.py)."""
-    from sim.render import SHADOW_FACTOR, _baked_for
-    from sim.shading import SHADOWLESS_SHADOW_FACTOR
+    from sim.render import _baked_for
+    from sim.shading import CAST_SHADOW_FACTOR, SHADOWLESS_SHADOW_FACTOR
     from sim.world import with_shadows
 
     on = with_shadows(load_world("procedural:0"), True)
@@ -207,7 +207,7 @@ def test_shadows_off_lights_the_shadowed_floor():
     assert shadowed.any(), "the procedural canyon walls should shadow some floor"
     assert np.array_equal(_baked_for(off)["shadow"], shadow_on)  # the same floor is hidden from the sun
     ratio = lit_on[shadowed] / lit_off[shadowed]
-    assert np.median(ratio) == pytest.approx(SHADOW_FACTOR / SHADOWLESS_SHADOW_FACTOR, abs=0.05)
+    assert np.median(ratio) == pytest.approx(CAST_SHADOW_FACTOR / SHADOWLESS_SHADOW_FACTOR, abs=0.05)
     sunlit = ~(shadow_on > 0)
     assert np.array_equal(lit_on[sunlit], lit_off[sunlit])
 

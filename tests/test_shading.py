@@ -157,3 +157,16 @@ def test_floor_look_on_marched_pixels_then_filled_keeps_marched_pixels_and_nearl
         nav_a, nav_b = np.all(a > 160, axis=2), np.all(b > 160, axis=2)
         assert (nav_a == nav_b).mean() >= 0.999, pose
     assert filled > 6 * 10_000  # the fill is exercised: most of the floor is shared
+
+
+def test_cast_shadow_is_one_flat_step_reaching_the_fringe():
+    """The real cast shadow is a flat step (0.85 of sunlit on dimaga, royalejandro, test_dataset) that covers
+    floor the blurred raster gives only 0.1-0.3: the cover is 0 outside, 1 from there in, monotone between."""
+    from sim.shading import CAST_SHADOW_COVER, cast_shadow_cover
+
+    raster = np.linspace(0.0, 1.0, 101)
+    cover = cast_shadow_cover(raster)
+    assert cover[raster <= CAST_SHADOW_COVER[0]].max() == 0.0
+    assert cover[raster >= CAST_SHADOW_COVER[1]].min() == 1.0
+    assert np.all(np.diff(cover) >= 0)
+    assert cast_shadow_cover(np.array([0.5]))[0] == 1.0  # the raster's half-shadow is full shadow
