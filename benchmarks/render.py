@@ -1,7 +1,7 @@
 """Renderer speed, old against new in one run, plus in-process mission frames/s.
 
     python -m benchmarks.render [--world real|procedural:0|PATH] [--frames 283] [--mission-s 60]
-                                [--no-old] [--no-mission]
+                                [--no-old] [--no-mission] [--baseline REV]
 
 Poses are the logged test_dataset poses when ../shared is present (what the twin really
 draws), else random floor poses of the world. The poses are rendered in order by sim.render, then
@@ -11,6 +11,9 @@ clock and CPU time of this process: on the shared 2-core machine the CPU time is
 figure), their ratio, how far the two images agree, JPEG encode time, and the frames/s of a short
 in-process mission (physics + render + JPEG + the client's perception and decision).
 Also the new renderer with tyre tracks laid along the poses (issue 28: <= 10 ms median with tracks).
+With --baseline REV it instead times the renderer of git revision REV (its sim/render.py and
+sim/shading.py) against the current one, pose by pose alternating in one process, and missions
+alternating: the before/after of a change measured in one run under one machine load.
 Goals (issue 25): new median <= 2 ms, mission >= 300 frames/s on one core. Prints, never asserts.
 """
 import argparse
@@ -112,6 +115,106 @@ def mission_speed(world, seconds, seed=0):
     return frames, frames / summary["wall"], frames / cpu
 
 
+BASELINE_FILES = ("sim/render.py", "sim/shading.py")  # the renderer's modules a --baseline revision supplies
+
+
+class BaselineRenderer:
+    """The renderer as it is at a git revision (its sim/render.py and sim/shading.py, loaded as modules of their
+    own beside the current ones), so one run times both on the same poses under the same machine load."""
+
+    def __init__(self, rev: str):
+        import importlib.util
+        import subprocess
+        import sys
+        import tempfile
+        from pathlib import Path
+
+        import sim.render  # noqa: F401  (the current modules are loaded first: `active` puts them back)
+        import sim.shading  # noqa: F401
+
+        root = Path(__file__).resolve().parents[1]
+        self.rev = subprocess.run(["git", "rev-parse", "--short", rev], cwd=root, check=True, capture_output=True,
+                                  text=True).stdout.strip()
+        folder = Path(tempfile.mkdtemp(prefix=f"baseline-{self.rev}-"))  # fresh: numba compiles, no stale cache
+        self.modules = {}
+        for rel in BASELINE_FILES:
+            source = subprocess.run(["git", "show", f"{rev}:{rel}"], cwd=root, check=True, capture_output=True,
+                                    text=True).stdout
+            name = f"baseline_{self.rev}_{Path(rel).stem}"
+            path = folder / f"{name}.py"
+            path.write_text(source)
+            spec = importlib.util.spec_from_file_location(name, path)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            self.modules[Path(rel).stem] = module
+        with self.active():
+            for module in self.modules.values():
+                module.__spec__.loader.exec_module(module)
+
+    def active(self):
+        """Context in which `sim.render` / `sim.shading` (also as imported inside functions) are the baseline's."""
+        import contextlib
+        import sys
+
+        import sim
+
+        @contextlib.contextmanager
+        def swap():
+            saved = {stem: sys.modules.get(f"sim.{stem}") for stem in self.modules}
+            try:
+                for stem, module in self.modules.items():
+                    sys.modules[f"sim.{stem}"] = module
+                    setattr(sim, stem, module)
+                yield
+            finally:
+                for stem, module in saved.items():
+                    sys.modules[f"sim.{stem}"] = module
+                    setattr(sim, stem, module)
+
+        return swap()
+
+
+def compare_with_baseline(world, poses, samples, baseline: BaselineRenderer, reps=2):
+    """CPU ms per frame of the current renderer and the baseline's, pose by pose alternating (which goes first
+    alternates too), and how far their images agree."""
+    from sim.render import Renderer
+
+    current = Renderer(world)
+    with baseline.active():
+        base = baseline.modules["render"].Renderer(world)
+        base.render(poses[0], samples)
+    current.render(poses[0], samples)
+    cpu = {"current": [], "baseline": []}
+    same, agree, nav = [], [], []
+    for rep in range(reps):
+        for i, pose in enumerate(poses):
+            imgs = {}
+            for who in (("current", "baseline") if (i + rep) % 2 else ("baseline", "current")):
+                if who == "baseline":
+                    with baseline.active():
+                        imgs[who], _, ms = _timed(lambda: base.render(pose, samples))
+                else:
+                    imgs[who], _, ms = _timed(lambda: current.render(pose, samples))
+                cpu[who].append(ms)
+            if rep == 0:
+                diff = np.abs(imgs["current"].astype(np.int16) - imgs["baseline"]).max(axis=2)
+                same.append(not diff.any())
+                agree.append(float((diff <= 1).mean()))
+                nav.append(float((np.all(imgs["current"] > NAV_THRESHOLD, axis=2)
+                                  == np.all(imgs["baseline"] > NAV_THRESHOLD, axis=2)).mean()))
+    return cpu, same, agree, nav
+
+
+def mission_speed_pair(world, seconds, baseline: BaselineRenderer, rounds=2):
+    """In-process mission frames/s per core of CPU, baseline and current renderer alternating `rounds` times."""
+    out = {"baseline": [], "current": []}
+    for _ in range(rounds):
+        with baseline.active():
+            out["baseline"].append(mission_speed(world, seconds)[2])
+        out["current"].append(mission_speed(world, seconds)[2])
+    return out
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m benchmarks.render", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--world", default="default")
@@ -119,8 +222,12 @@ def main(argv=None):
     parser.add_argument("--mission-s", type=float, default=60.0, help="simulated seconds of the mission run")
     parser.add_argument("--no-old", action="store_true", help="skip the old renderer")
     parser.add_argument("--no-mission", action="store_true", help="skip the mission run")
+    parser.add_argument("--baseline", metavar="REV", help="also time the renderer of this git revision against the "
+                        "current one in the same run (pose by pose alternating; missions alternating)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if args.baseline:
+        return _main_baseline(args)
     from sim.render import Renderer
     from sim.world import load_world
 
@@ -162,6 +269,41 @@ def main(argv=None):
         log.info("in-process mission (seed 0, %.0f s simulated, %d frames): %.0f frames/s wall, %.0f frames/s "
                  "per core of CPU time (goal >= %.0f)", args.mission_s, frames, fps_wall, fps_cpu,
                  GOAL_MISSION_FPS)
+    return 0
+
+
+
+def _main_baseline(args):
+    """`--baseline REV`: current against REV on the same poses, then missions alternating; prints the ratios."""
+    import os
+
+    from sim.world import load_world
+
+    world = load_world(args.world)
+    baseline = BaselineRenderer(args.baseline)
+    rng = np.random.default_rng(0)
+    poses = _poses(world, args.frames, rng)
+    spots = world.sample_spots[rng.choice(len(world.sample_spots), min(SAMPLES_IN_SCENE, len(world.sample_spots)),
+                                          replace=False)]
+    samples = [(x, y, 0.43, 0.0) for x, y in spots]
+    load0 = os.getloadavg()[0]
+    cpu, same, agree, nav = compare_with_baseline(world, poses, samples, baseline)
+    b, c = np.median(cpu["baseline"]), np.median(cpu["current"])
+    log.info("world %s, %d poses x 2, alternating; load average %.1f at the start, %.1f at the end", world.name,
+             len(poses), load0, os.getloadavg()[0])
+    log.info("baseline %s render ms/frame cpu: %s", baseline.rev, _stats(cpu["baseline"]))
+    log.info("current        render ms/frame cpu: %s", _stats(cpu["current"]))
+    log.info("speed-up baseline/current (ratio of medians): %.3fx (%.2f -> %.2f ms); goal <= %.1f ms: %s", b / c, b, c,
+             GOAL_MS, "OK" if c <= GOAL_MS else "NOT MET")
+    log.info("images: %d of %d frames byte-identical; pixels within 1 level %.3f %% (worst frame %.3f %%); "
+             "navigable mask the same on %.4f %% (worst frame %.3f %%)", sum(same), len(same), 100 * np.mean(agree),
+             100 * np.min(agree), 100 * np.mean(nav), 100 * np.min(nav))
+    if not args.no_mission:
+        fps = mission_speed_pair(world, args.mission_s, baseline)
+        log.info("in-process mission (seed 0, %.0f s simulated), frames/s per core of CPU, alternating: baseline %s: %s; "
+                 "current: %s; ratio of means %.3f (goal >= %.0f); load average %.1f", args.mission_s, baseline.rev,
+                 ", ".join(f"{v:.0f}" for v in fps["baseline"]), ", ".join(f"{v:.0f}" for v in fps["current"]),
+                 np.mean(fps["current"]) / np.mean(fps["baseline"]), GOAL_MISSION_FPS, os.getloadavg()[0])
     return 0
 
 
