@@ -8,7 +8,8 @@ Why it is built this way:
 - The map is a pair of per-cell vote accumulators (navigable, obstacle) fed only by
   nearby ground (range limit) while the body is level enough (tilt gate); the
   displayed ``rover.worldmap`` is rebuilt from the votes every frame, so early
-  wrong marks are overturned by later, better views.
+  wrong marks are overturned by later, better views.  The scored map's light-sand share is the
+  mean over range bands, so the many blurred far views of a wall foot do not outvote the near ones.
 - Sand in a cast shadow is too dark for the classic threshold; a colour-and-texture
   rule finds it.  It is mapped as floor (the map is scored against the canyon's
   floor), but the planner drives on the bright-sand map only (:func:`drive_map`):
@@ -80,7 +81,13 @@ MAP_RANGE_FALLOFF = 0.5  # vote weight at MAP_RANGE_M relative to 1 at the rover
 NAV_VOTE_WEIGHT = 1.0  # weight of one navigable top-down cell vote
 OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
 NAV_MAJORITY = 0.2  # the drive map and pocket floor take a cell as navigable when the light-sand share of votes exceeds this, 0..1 (edge cells are mixed)
-SCORED_NAV_MAJORITY = 0.25  # the scored map (rover.worldmap) asks this share: sunlit wall feet pass as sand, a one-cell fringe, 0..1
+SCORED_NAV_MAJORITY = 0.25  # the scored map (rover.worldmap) asks this light-sand share of a cell no range band has spoken for yet, 0..1
+# The scored map gives each range band an equal say (issue 27, round 5): a wall-foot cell gets thousands of
+# votes from 6-9 m, where it blurs into the wall, and a few hundred from 1.5-4.5 m, where it is plainly floor
+# or plainly not; summed, the far votes decide.  Averaged per band, each distance counts once.
+SCORED_BAND_EDGES_M = (1.5, 3.0, 4.5, 6.0)  # inner edges of the range bands, m (the last band runs to MAP_RANGE_M)
+SCORED_BAND_MIN_SHARE = 0.01  # a band's light share counts once it holds this share of the cell's votes (and MIN_CELL_VOTES), 0..1
+SCORED_BAND_SHARE = 0.35  # the scored map takes a cell as light sand when the mean of its bands' light shares exceeds this, 0..1
 SHADE_MAJORITY = 0.5  # ...or when light plus shadowed sand make up more than this share (the weaker evidence), 0..1
 MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 FILL_MIN_NEIGHBOURS = 5  # a seen cell with at least this many of its 8 neighbours navigable shows navigable too, cells
@@ -299,6 +306,7 @@ def _build_tables():
     """Precompute the top-down grid geometry (call again after changing grid/map constants)."""
     global _GRID_ROWS, _GRID_COLS, _GRID_X, _GRID_Y, _GRID_DIST, _GRID_ANGLE, _GRID_USABLE
     global _GRID_USABLE_U8, _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _MAP_DIST, _MAP_LOOK, _HORIZON_ROW, _LEVEL_H
+    global _MAP_BAND
     _GRID_ROWS = int(round(GRID_FORWARD_M / GRID_RES_M))
     _GRID_COLS = int(round(2 * GRID_HALF_WIDTH_M / GRID_RES_M))
     _GRID_X = (np.arange(_GRID_ROWS)[:, None] + 0.5) * GRID_RES_M + np.zeros((1, _GRID_COLS))  # fwd, m
@@ -314,6 +322,7 @@ def _build_tables():
     map_dist = dist.ravel()[_MAP_CELLS]
     _MAP_WEIGHT = 1.0 - (1.0 - MAP_RANGE_FALLOFF) * map_dist / MAP_RANGE_M
     _MAP_DIST = map_dist.astype(np.float32)
+    _MAP_BAND = np.digitize(_MAP_DIST, SCORED_BAND_EDGES_M).astype(np.int64)  # range band of each voting cell
     map_angle = angle.ravel()[_MAP_CELLS]
     # voting cells that also update the closest-look map: near, and in the middle of the view
     _MAP_LOOK = (_MAP_DIST <= LOOK_RANGE_MAX_M) & (np.abs(map_angle) <= math.radians(LOOK_HALF_ANGLE_DEG))
@@ -322,6 +331,7 @@ def _build_tables():
 
 
 _LABEL_UNKNOWN, _LABEL_OBSTACLE, _LABEL_NAV, _LABEL_SHADE, _LABEL_DIM_SHADE = 0, 1, 2, 3, 4
+SCORED_BANDS = len(SCORED_BAND_EDGES_M) + 1  # number of range bands
 _build_tables()
 
 
@@ -355,6 +365,8 @@ class PerceptionMemory:
         drive map as obstacle; :func:`pocket_floor` counts it too.
     dim_shade_votes: float32 (200, 200); the part of obs_votes that was darker sand in shadow
         (SHADE_SAND_MIN_R up to POCKET_SAND_MIN_R): navigable on the scored map only.
+    band_nav_votes, band_votes: float32 (SCORED_BANDS, 200, 200); nav_votes and all votes split by the
+        range band (SCORED_BAND_EDGES_M) of the ground that cast them: the scored map's light share.
     look_range: float32 (200, 200); the closest range (m) from which the camera has seen
         each cell within LOOK_HALF_ANGLE_DEG of the heading (inf: never within LOOK_RANGE_MAX_M).  Small samples only show from close
         by, so the sample search reads it through :func:`looked_at_within`.
@@ -367,6 +379,9 @@ class PerceptionMemory:
     shade_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     dim_shade_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     look_range: np.ndarray = field(default_factory=lambda: np.full((WORLD_SIZE, WORLD_SIZE), np.inf, np.float32))
+    band_nav_votes: np.ndarray = field(
+        default_factory=lambda: np.zeros((SCORED_BANDS, WORLD_SIZE, WORLD_SIZE), np.float32))
+    band_votes: np.ndarray = field(default_factory=lambda: np.zeros((SCORED_BANDS, WORLD_SIZE, WORLD_SIZE), np.float32))
     rock_clusters: List[list] = field(default_factory=list)
     frames_seen: int = 0
     frames_mapped: int = 0
@@ -470,10 +485,28 @@ def _majority_navigable(mem: PerceptionMemory, y0, y1, x0, x1, drive=False, dim_
     nav = mem.nav_votes[y0:y1, x0:x1]
     total = nav + mem.obs_votes[y0:y1, x0:x1]
     seen = total >= MIN_CELL_VOTES
-    is_nav = seen & (nav > (SCORED_NAV_MAJORITY if scored else NAV_MAJORITY) * total)
+    if scored:
+        share, spoken = band_light_share(mem, y0, y1, x0, x1)
+        is_nav = seen & np.where(spoken, share > SCORED_BAND_SHARE, nav > SCORED_NAV_MAJORITY * total)
+    else:
+        is_nav = seen & (nav > NAV_MAJORITY * total)
     if not drive:
         is_nav |= seen & (_sand_votes(mem, y0, y1, x0, x1, dim_shade) > SHADE_MAJORITY * total)
     return seen, is_nav
+
+
+def band_light_share(mem: PerceptionMemory, y0=0, y1=WORLD_SIZE, x0=0, x1=WORLD_SIZE):
+    """(share, spoken) float32 / bool arrays for the window: the mean light-sand share of the range bands
+    that hold at least SCORED_BAND_MIN_SHARE of the cell's votes and MIN_CELL_VOTES, and whether any band
+    does (else share is 0).  A share of the cell's votes, not a count, so the rule does not change with
+    the frame rate."""
+    nav = mem.band_nav_votes[:, y0:y1, x0:x1]
+    total = mem.band_votes[:, y0:y1, x0:x1]
+    ok = (total >= MIN_CELL_VOTES) & (total >= SCORED_BAND_MIN_SHARE * total.sum(axis=0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shares = np.where(ok, nav / total, 0.0)
+    count = ok.sum(axis=0)
+    return (shares.sum(axis=0) / np.maximum(count, 1)).astype(np.float32), count > 0
 
 
 def _sand_votes(mem: PerceptionMemory, y0, y1, x0, x1, dim_shade=True) -> np.ndarray:
@@ -661,16 +694,17 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
     """
     a = math.radians(yaw)
     window = np.zeros(4, np.int64)
-    found = _vote_kernel(grid.ravel(), _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST,
+    found = _vote_kernel(grid.ravel(), _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST, _MAP_BAND,
                          float(x), float(y), math.cos(a), math.sin(a), float(NAV_VOTE_WEIGHT),
                          float(OBS_VOTE_WEIGHT), mem.nav_votes, mem.obs_votes, mem.shade_votes,
-                         mem.dim_shade_votes, mem.look_range, window)
+                         mem.dim_shade_votes, mem.look_range, mem.band_nav_votes, mem.band_votes, window)
     return (int(window[0]), int(window[1]), int(window[2]), int(window[3])) if found else None
 
 
 @njit(cache=True)
-def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, xpos, ypos, c, s,
-                 nav_weight, obs_weight, nav_votes, obs_votes, shade_votes, dim_votes, look_range, window):
+def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, map_band, xpos, ypos, c, s,
+                 nav_weight, obs_weight, nav_votes, obs_votes, shade_votes, dim_votes, look_range, band_nav,
+                 band_all, window):
     """The votes of the grid cells ``cells`` (flat indices into ``labels``) at pose (xpos, ypos, yaw
     with cos c, sin s); writes (y0, y1, x0, x1) into ``window`` and returns False when no seen
     cell falls on the map.
@@ -712,15 +746,22 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, xp
     obs_sum = np.zeros(size)
     shade_sum = np.zeros(size)
     dim_sum = np.zeros(size)
+    bands = band_nav.shape[0]
+    band_nav_sum = np.zeros(bands * size)
+    band_all_sum = np.zeros(bands * size)
     for j in range(m):
         k = keep[j]
         label = labels[cells[k]]
         w = map_weight[k]
         cell = (iy[j] - y0) * cols + (ix[j] - x0)
+        bcell = map_band[k] * size + cell
         if label == _LABEL_NAV:
             nav_sum[cell] += w * nav_weight
+            band_nav_sum[bcell] += w * nav_weight
+            band_all_sum[bcell] += w * nav_weight
         else:
             obs_sum[cell] += w * obs_weight
+            band_all_sum[bcell] += w * obs_weight
             if label == _LABEL_SHADE:
                 shade_sum[cell] += w * obs_weight
             elif label == _LABEL_DIM_SHADE:
@@ -735,6 +776,9 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, xp
             obs_votes[yy, xx] = np.float32(np.float64(obs_votes[yy, xx]) + obs_sum[cell])
             shade_votes[yy, xx] = np.float32(np.float64(shade_votes[yy, xx]) + shade_sum[cell])
             dim_votes[yy, xx] = np.float32(np.float64(dim_votes[yy, xx]) + dim_sum[cell])
+            for b in range(bands):
+                band_nav[b, yy, xx] = np.float32(np.float64(band_nav[b, yy, xx]) + band_nav_sum[b * size + cell])
+                band_all[b, yy, xx] = np.float32(np.float64(band_all[b, yy, xx]) + band_all_sum[b * size + cell])
     window[0], window[1], window[2], window[3] = y0, y1, x0, x1
     return True
 

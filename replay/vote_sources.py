@@ -30,7 +30,7 @@ import perception
 
 log = logging.getLogger(__name__)
 
-RANGE_BANDS_M = (0.0, 1.5, 3.0, 4.5, 6.0, perception.MAP_RANGE_M + 0.01)  # vote range bands, m
+RANGE_BANDS_M = (0.0, *perception.SCORED_BAND_EDGES_M, perception.MAP_RANGE_M + 0.01)  # vote range bands (the scored map's), m
 SPEED_BANDS_M_S = (0.0, 0.2, 1.0, np.inf)  # |speed| bands, m/s (below 0.2: standing, turning in place, picking up)
 YAW_RATE_BANDS_DEG_S = (0.0, 5.0, 30.0, np.inf)  # |yaw rate| bands, deg/s
 WALL_BANDS_M = (0.0, 1.5, 3.0, np.inf)  # rover's distance to the nearest non-floor cell of the truth, m
@@ -124,6 +124,12 @@ def _memory(votes: VoteLog, keep: Optional[np.ndarray] = None):
     sums = [np.bincount(votes.cell, votes.votes[:, col] * w, n * n).reshape(n, n).astype(np.float32) for col in range(6)]
     for arr, col in ((mem.nav_votes, 0), (mem.obs_votes, 1), (mem.shade_votes, 2), (mem.dim_shade_votes, 3)):
         arr += sums[col]
+    for b in range(perception.SCORED_BANDS):  # the scored map's per-band light shares
+        in_band = (votes.band == b) * w
+        mem.band_nav_votes[b] += np.bincount(votes.cell, votes.votes[:, 0] * in_band, n * n).reshape(n, n).astype(
+            np.float32)
+        mem.band_votes[b] += np.bincount(votes.cell, (votes.votes[:, 0] + votes.votes[:, 1]) * in_band,
+                                         n * n).reshape(n, n).astype(np.float32)
     return mem, sums[4], sums[5]
 
 

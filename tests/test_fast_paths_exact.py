@@ -37,6 +37,13 @@ def _reference_vote(mem, grid, x, y, yaw):
                                                size).reshape(y1 - y0, w_cols)
     mem.obs_votes[y0:y1, x0:x1] += np.bincount(local[~is_nav], w[~is_nav] * P.OBS_VOTE_WEIGHT,
                                                size).reshape(y1 - y0, w_cols)
+    band = P._MAP_BAND[known_idx]
+    for b in range(P.SCORED_BANDS):
+        mine = band == b
+        mem.band_nav_votes[b, y0:y1, x0:x1] += np.bincount(local[mine & is_nav], w[mine & is_nav] * P.NAV_VOTE_WEIGHT,
+                                                           size).reshape(y1 - y0, w_cols)
+        all_w = w * np.where(is_nav, P.NAV_VOTE_WEIGHT, P.OBS_VOTE_WEIGHT)
+        mem.band_votes[b, y0:y1, x0:x1] += np.bincount(local[mine], all_w[mine], size).reshape(y1 - y0, w_cols)
     near = P._MAP_LOOK[known_idx]
     np.minimum.at(mem.look_range, (iy[near], ix[near]), P._MAP_DIST[known_idx[near]])
     return y0, y1, x0, x1
@@ -51,7 +58,8 @@ def _label_grid(img, pitch, roll):
 
 
 def _maps(mem):
-    return [mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.look_range]
+    return [mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.look_range, mem.band_nav_votes,
+            mem.band_votes]
 
 
 def test_compiled_vote_equals_the_numpy_reference_bit_for_bit(test_dataset_dir):

@@ -234,6 +234,13 @@ def test_edge_sand_in_deep_shadow_is_found_but_darker_walls_are_not():
     assert shade[102:128, 102:198].mean() < 0.05
 
 
+def _scored_light_test(mem):
+    """bool (200, 200): the scored map's light-sand test (mean band share, or the plain share where no band has spoken)."""
+    share, spoken = P.band_light_share(mem)
+    plain = mem.nav_votes > P.SCORED_NAV_MAJORITY * (mem.nav_votes + mem.obs_votes)
+    return np.where(spoken, share > P.SCORED_BAND_SHARE, plain)
+
+
 def test_sand_in_shadow_is_mapped_but_not_driven_on():
     img = _synthetic(sand_from_row=85)
     img[85:, :150] = _noisy((150, 140, 128), 2.0, shape=(75, 150))  # the left of the view is in shadow
@@ -247,8 +254,7 @@ def test_sand_in_shadow_is_mapped_but_not_driven_on():
     # the drive map is the stricter one about shadowed sand; it only keeps the light-sand fringe
     # cells (share between NAV_MAJORITY and SCORED_NAV_MAJORITY) that the scored map turns down
     mem = P.get_memory(r)
-    light_share = mem.nav_votes / np.maximum(mem.nav_votes + mem.obs_votes, 1e-9)
-    assert (light_share[driven & ~scored] <= P.SCORED_NAV_MAJORITY + 1e-6).all()
+    assert not _scored_light_test(mem)[driven & ~scored].any()
     shaded = scored & ~driven
     ys, xs = np.nonzero(shaded)
     assert ys.size >= 10 and ys.min() >= 100 and xs.min() >= 100  # ahead and to the left
@@ -274,8 +280,7 @@ def test_darker_shadowed_sand_is_scored_but_not_a_pocket_to_peek_into():
     driven = P.drive_map(r)[:, :, 2] > 0
     assert not (driven & ~pocket).any()  # each map is stricter than the last about shadowed sand ...
     mem = P.get_memory(r)  # ... while only the scored map turns down light-sand fringe cells
-    light_share = mem.nav_votes / np.maximum(mem.nav_votes + mem.obs_votes, 1e-9)
-    assert (light_share[pocket & ~scored] <= P.SCORED_NAV_MAJORITY + 1e-6).all()
+    assert not _scored_light_test(mem)[pocket & ~scored].any()
     deep, light = scored & ~pocket, pocket & ~driven
     assert deep.sum() >= 5 and light.sum() >= 5
     assert np.nonzero(deep)[0].mean() > np.nonzero(light)[0].mean()  # the deep shade is the one farther left
@@ -425,3 +430,45 @@ def test_closest_look_map_ignores_cells_at_the_side_of_the_view():
     # their near corner, so a rule without the angle records them at ~2.8 m) are not looked at
     assert not looked[102, 101] and not looked[97, 101]
     assert looked[100, 101] and looked[100, 102]  # straight ahead they are
+
+
+def _banded_cell(near_light, near_all, far_light, far_all, near_band=1):
+    """Cell (100, 100) voted on from one near band and from the farthest band (weighted votes)."""
+    mem = P.PerceptionMemory()
+    mem.band_nav_votes[near_band, 100, 100], mem.band_votes[near_band, 100, 100] = near_light, near_all
+    mem.band_nav_votes[-1, 100, 100], mem.band_votes[-1, 100, 100] = far_light, far_all
+    mem.nav_votes[100, 100] = near_light + far_light
+    mem.obs_votes[100, 100] = near_all + far_all - near_light - far_light
+    return mem
+
+
+def test_scored_map_gives_each_range_band_an_equal_say():
+    """A wall-foot floor cell seen plainly as sand from 1.5-3 m (90 %) but blurred into the wall by two thousand
+    votes from 6-9 m (5 %): summed, its light share is 0.09 and the far views would decide; per band it is floor.
+    A fringe cell that only the far band calls partly sand stays wall (issue 27, round 5)."""
+    floor = _banded_cell(90, 100, 100, 2000)
+    assert floor.nav_votes[100, 100] < P.SCORED_NAV_MAJORITY * (floor.nav_votes[100, 100] + floor.obs_votes[100, 100])
+    assert P.render_worldmap(floor)[100, 100, 2] == 255
+    assert P.render_worldmap(floor, drive=True)[100, 100, 2] == 0  # the planner's map is unchanged: summed votes
+    fringe = _banded_cell(10, 100, 800, 2000)  # near: wall; far: 40 % sand (the sum, 0.39, would call it floor)
+    assert fringe.nav_votes[100, 100] > P.SCORED_NAV_MAJORITY * (fringe.nav_votes[100, 100] + fringe.obs_votes[100, 100])
+    assert P.render_worldmap(fringe)[100, 100, 2] == 0
+
+
+def test_a_band_with_too_few_votes_has_no_say():
+    few = 0.9 * P.SCORED_BAND_MIN_SHARE * 2000  # a glimpse of sand from near by, under the share a band needs
+    mem = _banded_cell(few, few, 100, 2000)
+    assert P.render_worldmap(mem)[100, 100, 2] == 0
+    share, spoken = P.band_light_share(mem)
+    assert spoken[100, 100] and share[100, 100] == pytest.approx(0.05)
+    mem = _banded_cell(0, 0, 2, 4)  # no band has spoken: the plain share decides (0.5 > SCORED_NAV_MAJORITY)
+    mem.band_nav_votes[-1, 100, 100], mem.band_votes[-1, 100, 100] = 1, 2
+    mem.band_nav_votes[-2, 100, 100], mem.band_votes[-2, 100, 100] = 1, 2
+    assert not P.band_light_share(mem)[1][100, 100] and P.render_worldmap(mem)[100, 100, 2] == 255
+
+
+def test_band_rule_does_not_depend_on_the_frame_rate():
+    """Half the frames (15 fps instead of 30) halve every vote: the scored map must not change."""
+    mem = _banded_cell(90, 100, 100, 2000)
+    half = _banded_cell(45, 50, 50, 1000)
+    assert P.render_worldmap(mem)[100, 100, 2] == P.render_worldmap(half)[100, 100, 2] == 255
