@@ -82,8 +82,8 @@ class World:
     size_m: float = WORLD_SIZE_M
     obstacles: list = field(default_factory=list)  # optional dicts {name, x, y, radius_m, ...}
     rock_colliders: list | None = None  # sim.contact.Shape list the rover collides with; None: the render envelopes
-    cast_shadows: bool = False  # True: terrain casts shadows (Simple..Fantastic quality, as in test_dataset); the
-    # default is off because megalphian, royalejandro and dimaga-like drives show none (lit/shadowed floor ratio ~1)
+    cast_shadows: bool = False  # True: terrain casts shadows (the quality levels with shadows: test_dataset, dimaga,
+    # royalejandro); off (megalphian, no shadows) stays the missions' default; sim.realism detects a log's level
 
     # ------------------------------------------------------------------ geometry
     def clamp_xy(self, x, y):
