@@ -226,6 +226,9 @@ def main(argv=None):
                         "current one in the same run (pose by pose alternating; missions alternating)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    import cv2
+
+    cv2.setNumThreads(1)  # as sim.evaluate's workers (one mission per core): OpenCV's helper threads only add CPU time
     if args.baseline:
         return _main_baseline(args)
     from sim.render import Renderer

@@ -126,6 +126,9 @@ def main(argv=None):
     parser.add_argument("--mission-s", type=float, default=60.0, help="simulated seconds of the mission (0: none)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    import cv2
+
+    cv2.setNumThreads(1)  # as sim.evaluate's workers (one mission per core): OpenCV's helper threads only add CPU time
     import os
 
     from benchmarks.render import _poses
