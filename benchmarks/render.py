@@ -208,6 +208,9 @@ def compare_with_baseline(world, poses, samples, baseline: BaselineRenderer, rep
 def mission_speed_pair(world, seconds, baseline: BaselineRenderer, rounds=2):
     """In-process mission frames/s per core of CPU, baseline and current renderer alternating `rounds` times."""
     out = {"baseline": [], "current": []}
+    with baseline.active():  # warm-up: the baseline's kernels (tracks, samples) compile here, not in a timed run
+        mission_speed(world, 2.0)
+    mission_speed(world, 2.0)
     for _ in range(rounds):
         with baseline.active():
             out["baseline"].append(mission_speed(world, seconds)[2])
