@@ -83,6 +83,8 @@ FRONTIER_COMMIT_S = 10.0  # a frontier target chosen this recently is kept while
 SEARCH_FACES_PER_GOAL = 2  # turns to face unsearched wall feet at one reached search goal, at most
 SEARCH_GOAL_KINDS = ("peek", "search", "look")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet
 SEARCH_FACE_KINDS = ("peek", "look")  # ...those reached only to look at something beside them: the rover turns to face it
+SEARCH_KEEP_MARGIN_M = 6.0  # a look or far-floor goal still open is kept unless another is this much cheaper (explore.search_cost), m
+SEARCH_GOALS_PER_FRAME = 3  # search goals one frame may tick off as reached (a goal under the rover's wheels) before it plans the next one
 SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
 EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
@@ -192,12 +194,17 @@ class NavMemory:
         self.search_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places the search has visited
         self.search_faced_goal = None  # the search goal the rover last turned at to face unsearched wall feet
         self.search_faces = 0  # ...and how many turns it made there
+        self.in_sight = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # cells a clear line of sight reached within SEARCH_LOOK_M (explore.mark_in_sight)
+        self.look_stand_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # look stands already reached
+        self.look_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # wall feet given up (faced LOOK_TRIES times unseen, or a stuck beside them)
+        self.look_tries = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), np.int16)  # look stands each unsearched wall foot was faced from
         self.goal_best = math.inf
         self.goal_best_time = 0.0
         self.goal_since = 0.0  # when the current path goal was chosen, s
         self.loops = explore.LoopDetector()
         self.visits = explore.VisitMap((grid.GRID_SIZE, grid.GRID_SIZE))
         self.seen_close = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # cells looked at from close
+        self.seen_near = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # ...from SEEN_CLOSE_SAMPLES_M (frontiers while samples are missing)
         # samples
         self.rock_target = None  # world (x, y) of the rock being approached
         self.rock_since = 0.0  # when the current rock target was chosen, s
@@ -324,6 +331,12 @@ def _update_memory(rover, nav, s):
         nav.visits.update(s.t, grid.world_to_cell(s.pos))
         nav.loops.update(s.t, s.pos, s.yaw)
         explore.mark_seen_close(nav.seen_close, s.pos, s.yaw)
+        if s.samples_remaining is None or s.samples_remaining > 0:
+            explore.mark_seen_close(nav.seen_near, s.pos, s.yaw, explore.SEEN_CLOSE_SAMPLES_M)
+        if s.samples_remaining is None or s.samples_remaining > 0:
+            explore.mark_in_sight(nav.in_sight, getattr(rover, "worldmap", None), s.pos, s.yaw,
+                                  explore.SEARCH_LOOK_M, perception.LOOK_HALF_ANGLE_DEG,
+                                  reactive.reach_profile(s.nav_angles, s.nav_dists, s.obs_angles, s.obs_dists))
     # a pickup that just finished, or a sample count that dropped, means a collection
     finished = nav.was_picking and not s.picking_up
     dropped = (nav.last_remaining is not None and s.samples_remaining is not None
@@ -495,7 +508,7 @@ def _give_up_search_goal_near(nav, s):
     gx, gy = grid.cell_to_world(*goal)
     if math.hypot(gx - s.pos[0], gy - s.pos[1]) <= SEARCH_STUCK_GIVE_UP_M:
         radius = _search_done_radius(kind)
-        explore.ignore_disc(nav.search_done, goal, radius)
+        explore.ignore_disc(nav.look_done if kind == "look" else nav.search_done, goal, radius)
         nav.path_goal = None
 
 
@@ -627,19 +640,36 @@ def mode_search(rover, nav, s):
     """Map complete, samples missing: peek into shadowed pockets and visit mapped floor far from
     the trail, nearest first; None when nothing is left."""
     frame_maps = {}  # maps this frame's replan and face turn share (see _unsearched_wall_feet)
-    if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or _needs_replan(nav, s):
-        _plan_search(rover, nav, s, frame_maps)
-    if not nav.search_left or nav.path_goal is None or len(nav.path_xy) < 2:
-        return None
-    kind, goal = nav.path_goal
-    goal_xy = grid.cell_to_world(*goal)
-    if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M or _goal_stalled(nav, s):
+    for _goal in range(SEARCH_GOALS_PER_FRAME):
+        if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or _needs_replan(nav, s):
+            _plan_search(rover, nav, s, frame_maps)
+        if not nav.search_left or nav.path_goal is None:
+            return None
+        kind, goal = nav.path_goal
+        goal_xy = grid.cell_to_world(*goal)
+        reached = (len(nav.path_xy) < 2 or _goal_stalled(nav, s)
+                   or math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M)
+        if not reached:
+            return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
         if kind in SEARCH_FACE_KINDS and _face_unsearched(rover, nav, s, goal, frame_maps):
             return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
-        radius = _search_done_radius(kind)
-        explore.ignore_disc(nav.search_done, goal, radius)
+        if kind == "look":
+            _leave_look_stand(rover, nav, s, goal, frame_maps)
+        else:
+            explore.ignore_disc(nav.search_done, goal, _search_done_radius(kind))
         nav.plan_time = -math.inf
-    return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
+    # goals under the rover's wheels were ticked off; the next frame plans on (an empty path here
+    # once sent seed 15 home with two samples missing)
+    return Command(0.0, BRAKE_STOP if abs(s.vel) > STOPPED_SPEED_MPS else 0.0, 0.0)
+
+
+def _leave_look_stand(rover, nav, s, goal, frame_maps=None):
+    """A look stand is done once reached and faced; the wall feet around it that are still unseen
+    (hidden behind a rock) stay open for another stand until LOOK_TRIES stands faced them."""
+    explore.ignore_disc(nav.look_stand_done, goal, explore.LOOK_STAND_DONE_M)
+    free, obstacle, _unknown = _grids(rover)
+    unsearched = _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle)
+    explore.give_up_faced(nav.look_tries, nav.look_done, unsearched, s.pos)
 
 
 def _search_done_radius(kind):
@@ -659,7 +689,7 @@ def _face_unsearched(rover, nav, s, goal, frame_maps=None):
     if nav.search_faces >= SEARCH_FACES_PER_GOAL:
         return False
     free, obstacle, _unknown = _grids(rover)
-    heading = explore.face_heading(_unsearched_wall_feet(rover, frame_maps, free, obstacle), s.pos, s.yaw)
+    heading = explore.face_heading(_unsearched_wall_feet(rover, nav, frame_maps, free, obstacle), s.pos, s.yaw)
     if heading is None:
         return False
     nav.search_faces += 1
@@ -917,13 +947,13 @@ def _grids(rover):
     return grid.classify(wm)
 
 
-def _unsearched_wall_feet(rover, frame_maps, free, obstacle):
+def _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle):
     """explore.unsearched_wall_feet, computed once per frame: a search replan and the face turn at a
     reached goal can both ask in the same frame, from the same drive map and look map. ``frame_maps``
     is the frame's dict (None: no sharing)."""
     cached = None if frame_maps is None else frame_maps.get("unsearched_wall_feet")
     if cached is None:
-        looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
+        looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M) & nav.in_sight  # in view, not behind a rock
         cached = explore.unsearched_wall_feet(free, obstacle, looked)
         if frame_maps is not None:
             frame_maps["unsearched_wall_feet"] = cached
@@ -987,7 +1017,7 @@ def _plan_explore(rover, nav, s):
     """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
     free, obstacle, unknown = _grids(rover)
     _remember_unsearched(rover, nav, s, free, obstacle)
-    mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, nav.seen_close)
+    mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
     targets, cost, parent, dist = [], None, None, None
     for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
         dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
@@ -1003,7 +1033,7 @@ def _plan_explore(rover, nav, s):
         nav.no_frontier_plans += 1
         if dist is not None:  # dist is from the last cost grid: without the stuck memory when there is any
             nav.hidden_frontiers = len(explore.ignored_frontiers(free, unknown, nav.frontier_abandoned, dist,
-                                                                 obstacle, nav.seen_close))
+                                                                 obstacle, _seen_for_frontiers(nav, s)))
         nav.explored = nav.no_frontier_plans >= EXPLORED_CONFIRM_PLANS and s.t > EXPLORED_MIN_TIME_S
         _set_path(nav, s, "frontier", None, [])
         nav.plan_time = s.t - REPLAN_S + 0.5  # look again soon
@@ -1026,9 +1056,11 @@ def _plan_search(rover, nav, s, frame_maps=None):
                                         explore.search_target(free, visited, nav.search_done, dist, s.pos, s.yaw),
                                         dist,
                                         explore.nearest_target(explore.look_targets(unsearched, free, visited,
-                                                                                    nav.search_done, dist),
+                                                                                    nav.look_done, dist,
+                                                                                    nav.look_stand_done),
                                                                s.pos, s.yaw),
                                         s.pos, s.yaw)
+    chosen = _keep_search_goal(nav, s, chosen, dist, free, unsearched)
     kind, goal = chosen if chosen is not None else ("search", None)
     if goal is None:
         nav.search_left = False
@@ -1040,10 +1072,35 @@ def _plan_search(rover, nav, s, frame_maps=None):
     _set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
 
 
+def _keep_search_goal(nav, s, chosen, dist, free, unsearched):
+    """The current look or far-floor goal while it is still open and no more than SEARCH_KEEP_MARGIN_M
+    dearer (search_cost) than `chosen`, else `chosen`.
+
+    Replanning every 1.5 s picked the cheapest goal afresh; as the rover moved, a cluster's nearest
+    stand and the heading term moved too, and on seed 17 (15 fps) the search went back and forth
+    between the same few stands in the rock field by the start (one chosen three times in 40 s)."""
+    cur = nav.path_goal
+    if chosen is None or cur is None or cur == chosen or cur[0] not in ("look", "search") or cur[1] is None:
+        return chosen
+    kind, (r, c) = cur
+    if not (free[r, c] and np.isfinite(dist[r, c])):
+        return chosen
+    if kind == "look":
+        beside = unsearched[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2] & ~nav.look_done[max(r - 1, 0):r + 2,
+                                                                                        max(c - 1, 0):c + 2]
+        if nav.look_stand_done[r, c] or not beside.any():
+            return chosen
+    elif nav.search_done[r, c]:
+        return chosen
+    (cr, cc) = chosen[1]
+    costs = explore.search_cost([r, cr], [c, cc], [dist[r, c], dist[cr, cc]], s.pos, s.yaw)
+    return cur if costs[0] <= costs[1] + SEARCH_KEEP_MARGIN_M else chosen
+
+
 def _remember_unsearched(rover, nav, s, free, obstacle, frame_maps=None):
     """Unsearched wall feet now (see _unsearched_wall_feet), kept in nav for the turns in place
     until the next plan; None is kept once every sample is in."""
-    unsearched = _unsearched_wall_feet(rover, frame_maps, free, obstacle)
+    unsearched = _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle)
     nav.unsearched = unsearched if s.samples_remaining is None or s.samples_remaining > 0 else None
     return unsearched
 
@@ -1176,4 +1233,34 @@ def _should_go_home(rover, nav, s):
         nav.hidden_frontiers = 0
         nav.explored = False
         return False
+    if _frontier_reachable(rover, nav, s):
+        # the way into an arm was mapped as wall when the map was called complete; driving near it
+        # later for a sample opened it (seed 15, shadows on: the west arm was never entered)
+        log.info("a reachable frontier appeared after the map was called complete, t=%.1f: exploring on", s.t)
+        nav.explored = False
+        nav.no_frontier_plans = 0
+        nav.plan_time = -math.inf
+        return False
     return True
+
+
+def _seen_for_frontiers(nav, s):
+    """Walls looked at from close enough to close a frontier: from SEEN_CLOSE_SAMPLES_M while samples
+    are missing (an arm's tip or a side pocket may hold one; small samples show from 3-5 m), from
+    SEEN_CLOSE_M once all are in (the map alone is done sooner: seed 1 took 612 s instead of 507 s
+    exploring at 5 m after its sixth sample)."""
+    missing = s.samples_remaining is None or s.samples_remaining > 0
+    return nav.seen_near if missing else nav.seen_close
+
+
+def _frontier_reachable(rover, nav, s):
+    """Any reachable frontier cluster on today's map (the same test as _plan_explore's)."""
+    free, obstacle, unknown = _grids(rover)
+    mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
+    if not mask.any():
+        return False
+    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
+        dist, _parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
+        if len(explore.frontier_targets(mask, dist)):
+            return True
+    return False

@@ -6,10 +6,14 @@ works through the canyon tree depth first (nearest unexplored branch next)
 instead of wandering. Frontiers the rover reached without resolving (cells the
 camera cannot see) are ignored so they never pull it back.
 """
+import math
 from collections import deque
 
 import cv2
 import numpy as np
+from numba import njit
+
+from navigation import grid, reactive
 
 FRONTIER_MIN_CELLS = 1  # smaller frontier clusters are noise, cells (a 2 m wide canyon has a 1-2 cell frontier)
 FRONTIER_WINDOW = 5  # window edge for counting unknown cells around a frontier cell, cells
@@ -24,6 +28,7 @@ CIRCLE_WINDOW_S = 15.0  # window for circling detection, s
 CIRCLE_TURN_DEG = 400.0  # net heading change within the window that means circling, degrees
 CIRCLE_MAX_SPAN_M = 10.0  # ...while staying within a box this size, m
 SEEN_CLOSE_M = 7.0  # a mapped obstacle counts as confirmed once the camera looked at it from this close, m
+SEEN_CLOSE_SAMPLES_M = 5.0  # ...this close while samples are missing (7 called arm tips and side pockets explored with a sample in them: seeds 38, 17), m
 SEEN_HALF_FOV_DEG = 45.0  # ...within this half-angle of the heading, degrees
 SEARCH_MIN_AWAY_M = 3.0  # sample search visits mapped floor at least this far from the trail (4 missed a rock seen only from a wall strip), m
 PEEK_RANGE_M = 3.0  # the smallest sample shows in the camera from about this close, m
@@ -43,6 +48,12 @@ SWEEP_RADIUS_M = 8.0  # a long turn in place counts unsearched wall feet this cl
 SWEEP_HALF_FOV_DEG = 40.0  # ...within this half-angle of the heading (perception's look cone), degrees
 SWEEP_MAX_TURN_DEG = 225.0  # the long way round is taken only up to this (ROTATE_TIMEOUT_S at ~45 deg/s is 270), degrees
 SWEEP_MIN_CELLS = 3  # ...and only when it sweeps at least this many unsearched wall-foot cells the short way does not, cells
+SIGHT_WALL_DEPTH_M = 0.7  # a line of sight sees mapped wall this deep past where it first meets wall, no deeper (map edges are a cell fuzzy; a rock in front hides the nook behind it: seeds 7, 15), m
+SIGHT_STEP_M = 0.2  # line-of-sight march step, m
+SIGHT_RAY_DEG = 2.0  # angle between lines of sight (0.14 m apart at 4 m, well under a cell), degrees
+SIGHT_MIN_FORWARD_M = 0.6  # ground nearer than this (ahead of the rover) is hidden under the camera (perception.GRID_MIN_FORWARD_M), m
+LOOK_STAND_DONE_M = 1.5  # a reached look stand rules out stands this close; the wall feet it faced stay open if still unseen, m
+LOOK_TRIES = 2  # wall feet faced from this many look stands and still unseen are given up (a cell the camera cannot see never holds the search)
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
@@ -56,7 +67,7 @@ def _seen_offsets():
 _SEEN_DY, _SEEN_DX = _seen_offsets()
 
 
-def mark_seen_close(seen, pos, yaw_deg):
+def mark_seen_close(seen, pos, yaw_deg, radius_m=SEEN_CLOSE_M):
     """Mark cells the camera looks at from close range this frame (in place).
 
     Far ground in a narrowing canyon is often mapped as obstacle (walls fill the
@@ -68,12 +79,72 @@ def mark_seen_close(seen, pos, yaw_deg):
     cx, cy = pos[0] - 0.5, pos[1] - 0.5
     ang = np.arctan2(_SEEN_DY + (np.round(cy) - cy), _SEEN_DX + (np.round(cx) - cx)) - np.radians(yaw_deg)
     ang = (ang + np.pi) % (2 * np.pi) - np.pi
-    near = np.hypot(_SEEN_DX, _SEEN_DY) <= 1.5
-    keep = (np.abs(ang) <= np.radians(SEEN_HALF_FOV_DEG)) | near
+    rng = np.hypot(_SEEN_DX, _SEEN_DY)
+    keep = ((np.abs(ang) <= np.radians(SEEN_HALF_FOV_DEG)) & (rng <= radius_m)) | (rng <= 1.5)
     rows = (np.round(cy) + _SEEN_DY[keep]).astype(np.int64)
     cols = (np.round(cx) + _SEEN_DX[keep]).astype(np.int64)
     ok = (rows >= 0) & (rows < seen.shape[0]) & (cols >= 0) & (cols < seen.shape[1])
     seen[rows[ok], cols[ok]] = True
+    return seen
+
+
+@njit(cache=True)
+def _sight_kernel(worldmap, seen, x, y, yaw, half_fov, n_rays, max_range, step, min_forward, wall_depth,
+                  nav_min, dominance, reach, reach_half_fov_deg, reach_bin_deg):
+    """March n_rays lines of sight over yaw +- half_fov (radians) from (x, y) out to max_range and mark
+    every cell they reach in ``seen``. A cell is opaque when the worldmap calls it obstacle (red > 0
+    and not navigable by grid.classify's rule, with nav_min / dominance passed in); a line stops
+    once it has run more than wall_depth through opaque cells. With a non-empty ``reach`` (this
+    frame's free distance per angular bin, navigation.reactive.reach_profile) a line also stops
+    wall_depth beyond where the camera saw the floor end."""
+    size_y, size_x = seen.shape
+    for i in range(n_rays):
+        off = -half_fov + 2.0 * half_fov * i / (n_rays - 1) if n_rays > 1 else 0.0
+        c, s = math.cos(yaw + off), math.sin(yaw + off)
+        r = min_forward / math.cos(off)
+        wall = 0.0
+        far = max_range
+        if reach.size > 0:
+            k = int(math.floor((off * (180.0 / math.pi) + reach_half_fov_deg) / reach_bin_deg))
+            far = min(far, reach[k] + wall_depth) if 0 <= k < reach.size else far
+        while r <= far:
+            cx = int(math.floor(x + r * c))
+            cy = int(math.floor(y + r * s))
+            if cx < 0 or cx >= size_x or cy < 0 or cy >= size_y:
+                break
+            blue = np.float32(worldmap[cy, cx, 2])
+            red = np.float32(worldmap[cy, cx, 0])
+            if red > 0 and not (blue >= nav_min and blue * dominance >= red):
+                wall += step
+                if wall > wall_depth:
+                    break
+            seen[cy, cx] = True
+            r += step
+
+
+def mark_in_sight(seen, worldmap, pos, yaw_deg, range_m, half_fov_deg, reach=None):
+    """Mark (in place) the cells within range_m and half_fov_deg of the heading that the camera can
+    see from pos: lines of sight pass mapped floor freely and stop SIGHT_WALL_DEPTH_M into mapped wall
+    and, with `reach` (this frame's reactive.reach_profile), SIGHT_WALL_DEPTH_M beyond the floor the
+    camera saw in their direction.
+
+    Perception's closest-look map records every cell of the ground footprint, including the cells
+    a rock in front hides: on seeds 7 and 15 the rover faced the east-nook sample from 3.5 m across
+    the rocks south-west of it, called the nook searched, and never saw the rock. The map alone is not
+    enough: on seed 15 the rock in front was mapped as floor; the frame, a rock face filling the view,
+    showed no floor at all.
+    """
+    if not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
+        return seen
+    wm = np.asarray(worldmap)
+    if wm.ndim != 3 or wm.shape[:2] != seen.shape or wm.shape[2] < 3:
+        return seen
+    half = math.radians(half_fov_deg)
+    n_rays = int(math.ceil(2.0 * half_fov_deg / SIGHT_RAY_DEG)) + 1
+    reach = np.zeros(0) if reach is None else np.ascontiguousarray(reach, dtype=np.float64)
+    _sight_kernel(wm, seen, float(pos[0]), float(pos[1]), math.radians(yaw_deg), half, n_rays, float(range_m),
+                  SIGHT_STEP_M, SIGHT_MIN_FORWARD_M, SIGHT_WALL_DEPTH_M, np.float32(grid.NAV_MIN_VALUE),
+                  np.float32(grid.OBSTACLE_DOMINANCE), reach, float(reactive.FOV_HALF_DEG), float(reactive.BIN_DEG))
     return seen
 
 
@@ -238,7 +309,7 @@ def unsearched_wall_feet(free, obstacle, looked):
     return obstacle & floor_near & ~looked
 
 
-def look_targets(unsearched, free, visited, done, dist):
+def look_targets(unsearched, free, visited, done, dist, stand_done=None):
     """Clusters of unsearched wall feet within SEARCH_LOOK_TRAIL_M of the trail (`visited`, minus `done`
     cells), each with the floor cell beside it that is nearest by path: one (row, col, path_cost, size)
     per cluster, like frontier_targets.
@@ -246,6 +317,8 @@ def look_targets(unsearched, free, visited, done, dist):
     The far-floor search visits floor away from the trail and so never went near a nook beside it
     (seeds 10 and 23: the east-nook sample lay 4-5 m from the trail, never in the camera's view).
     Wall feet farther from the trail get faced when a far-floor visit nears them (face_heading).
+    Stands in `stand_done` (reached before) are not offered again, so wall feet a stand could not
+    see are next looked at from another side (see give_up_faced).
     """
     trail_dist = cv2.distanceTransform((~visited).astype(np.uint8), cv2.DIST_L2, 3)
     mask = unsearched & ~done & (trail_dist <= SEARCH_LOOK_TRAIL_M)
@@ -255,6 +328,8 @@ def look_targets(unsearched, free, visited, done, dist):
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
     beside = cv2.dilate(labels.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int64)
     stand = free & (beside > 0) & np.isfinite(dist)
+    if stand_done is not None:
+        stand &= ~stand_done
     rows, cols = np.nonzero(stand)
     if rows.size == 0:
         return np.zeros((0, 4))
@@ -264,6 +339,27 @@ def look_targets(unsearched, free, visited, done, dist):
         return np.zeros((0, 4))
     rows, cols, lab, d = rows[ok], cols[ok], lab[ok], d[ok]
     return _first_per_cluster(rows, cols, lab, d, stats, np.lexsort((d, lab)))
+
+
+def give_up_faced(tries, done, unsearched, pos, radius_m=SEARCH_FACE_RADIUS_M, max_tries=LOOK_TRIES):
+    """Count one more look at the unsearched cells within radius_m of pos (in `tries`, int array) and
+    add those looked at max_tries times to `done` (both in place). Returns done.
+
+    A reached look stand used to rule out every wall foot within 5 m, seen or not; from a stand
+    behind a rock the nook stayed hidden and was never looked at again (seeds 7 and 15)."""
+    if not (np.isfinite(pos[0]) and np.isfinite(pos[1])):
+        return done
+    r = int(np.ceil(radius_m)) + 1
+    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
+    y0, y1 = max(cy - r, 0), min(cy + r + 1, unsearched.shape[0])
+    x0, x1 = max(cx - r, 0), min(cx + r + 1, unsearched.shape[1])
+    if y0 >= y1 or x0 >= x1:
+        return done
+    ys, xs = np.mgrid[y0:y1, x0:x1]
+    near = (np.hypot(xs + 0.5 - pos[0], ys + 0.5 - pos[1]) <= radius_m) & unsearched[y0:y1, x0:x1]
+    tries[y0:y1, x0:x1] += near
+    done[y0:y1, x0:x1] |= near & (tries[y0:y1, x0:x1] >= max_tries)
+    return done
 
 
 def _unsearched_offsets_within(unsearched, pos, radius_m):

@@ -383,6 +383,7 @@ def test_a_reached_look_goal_turns_to_face_an_unsearched_nook_first():
     mem = perception.get_memory(r)
     mem.look_range[:] = 1.0  # everything seen from close...
     mem.look_range[76:80, 123:127] = np.inf  # ...but the south wall's foot at x 123-126
+    r.nav.in_sight[:] = True
     s = decision._read_inputs(r)
     r.nav.path_goal = ("look", (82, 121))  # reached
     r.nav.path_xy, r.nav.path_idx, r.nav.plan_time = np.array([(120.5, 82.5), (121.5, 82.5)]), 0, s.t
@@ -394,7 +395,28 @@ def test_a_reached_look_goal_turns_to_face_an_unsearched_nook_first():
     mem.look_range[:] = 1.0  # now seen from close
     r.nav.rotate_heading = None
     decision.mode_search(r, r.nav, s)
-    assert r.nav.rotate_heading is None and r.nav.search_done[82, 121]
+    assert r.nav.rotate_heading is None and r.nav.look_stand_done[82, 121]
+
+
+def test_wall_feet_a_look_stand_could_not_see_stay_open_for_another_stand():
+    """Seeds 7 and 15: from a stand behind the rocks south-west of the east nook the rover faced the
+    nook, saw only the rocks, and the whole place counted as searched; the sample was never found."""
+    import perception
+    r = make_rover(pos=(121.5, 82.5), yaw=315.0, t=500.0)
+    perception.get_memory(r).look_range[:] = 1.0  # the footprint covered everything...
+    r.nav.in_sight[:] = True
+    r.nav.in_sight[76:80, 123:127] = False  # ...but a rock hid the nook's wall feet
+    s = decision._read_inputs(r)
+    r.nav.search_faced_goal, r.nav.search_faces = (82, 121), decision.SEARCH_FACES_PER_GOAL  # turned already
+    r.nav.path_goal = ("look", (82, 121))
+    r.nav.path_xy, r.nav.path_idx, r.nav.plan_time = np.array([(120.5, 82.5), (121.5, 82.5)]), 0, s.t
+    decision.mode_search(r, r.nav, s)
+    assert r.nav.look_stand_done[82, 121], "this stand is used up"
+    assert not r.nav.look_done[76:80, 123:127].any(), "the hidden wall feet are still to be searched"
+    assert r.nav.look_tries[79, 123] == 1  # the south wall (row 79) at x 123
+    r.nav.search_faced_goal = (84, 125)  # a second stand, also blind
+    decision._leave_look_stand(r, r.nav, s, (84, 125))
+    assert r.nav.look_done[79, 123], "faced from two stands and still unseen: given up"
 
 
 @pytest.mark.parametrize("feet_side, expect_left", [(True, True), (False, False)])
@@ -444,3 +466,75 @@ def test_a_rock_approach_decided_again_after_a_stuck_gets_its_own_close_timeout(
                         empty, empty, empty, empty, False, False, 1)
     decision.mode_sample(r, nav, s)
     assert nav.rock_target is None
+
+
+def test_a_search_goal_under_the_wheels_is_ticked_off_not_a_reason_to_go_home():
+    """Seed 15 (shadows on): a look stand in the rover's own cell gave a one-point path; mode_search
+    returned nothing for that frame and the rover went home with two samples missing."""
+    import perception
+    r = make_rover(pos=(121.5, 80.5), yaw=270.0, t=480.0)  # beside the south wall (row 79), facing it
+    r.samples_remaining = 2
+    r.nav.home = (100.0, 85.0)
+    r.nav.explored, r.nav.second_sweep_done = True, True
+    perception.get_memory(r).look_range[:] = 1.0
+    r.nav.in_sight[:] = True
+    r.nav.in_sight[79, 119:124] = False  # wall feet right beside the rover, unseen
+    r.nav.visits.last_visit[80:91, 90:130] = 400.0  # the whole corridor driven: no far floor
+    r.nav.search_faced_goal, r.nav.search_faces = (80, 121), decision.SEARCH_FACES_PER_GOAL  # turned there already
+    s = decision._read_inputs(r)
+    cmd = decision.mode_search(r, r.nav, s)
+    assert r.nav.look_stand_done[80, 121], "the stand under the wheels was ticked off"
+    assert cmd is not None
+    decision.decision_step(r)
+    assert r.nav.path_goal is None or r.nav.path_goal[0] != "home"
+
+
+def test_a_frontier_that_became_reachable_after_the_map_was_called_complete_is_explored():
+    """Seed 15 (shadows on): the way into the west arm was blocked when the map was called complete;
+    the rover later drove through it for a sample and went home with a fifth of the canyon unmapped."""
+    r = make_rover(pos=(110.0, 85.0), t=400.0)  # the corridor's east end (x 130) is still open
+    r.samples_remaining = 0
+    r.nav.home = (100.0, 85.0)
+    r.nav.explored, r.nav.second_sweep_done = True, True
+    s = decision._read_inputs(r)
+    assert not decision._should_go_home(r, r.nav, s)
+    assert not r.nav.explored
+    r.worldmap[80:91, 130, 0], r.worldmap[80:91, 130, 2] = 255, 0  # closed: nothing left to explore
+    r.nav.explored = True
+    assert decision._should_go_home(r, r.nav, s)
+
+
+def test_the_search_keeps_an_open_goal_unless_another_is_much_nearer():
+    """Seed 17 (15 fps): replanning every 1.5 s picked the cheapest goal afresh and the search went
+    back and forth between the same few stands."""
+    r = make_rover(pos=(100.5, 85.5), yaw=0.0, t=500.0)
+    s = decision._read_inputs(r)
+    free, obstacle, _ = decision._grids(r)
+    dist = np.full((200, 200), np.inf)
+    dist[80:91, 90:130] = np.abs(np.arange(90, 130) + 0.5 - 100.5)[None, :]
+    unsearched = np.zeros((200, 200), bool)
+    unsearched[79, 110:113] = True  # wall feet beside the current stand (80, 111)
+    r.nav.path_goal = ("look", (80, 111))
+    near = ("search", (85, 109))  # 9 m by path, straight ahead; the stand: 11 m and 24 deg off (14.4)
+    assert decision._keep_search_goal(r.nav, s, near, dist, free, unsearched) == ("look", (80, 111))
+    much_nearer = ("search", (85, 101))
+    assert decision._keep_search_goal(r.nav, s, much_nearer, dist, free, unsearched) == much_nearer
+    r.nav.look_stand_done[80, 111] = True  # the stand was used meanwhile: no longer open
+    assert decision._keep_search_goal(r.nav, s, near, dist, free, unsearched) == near
+    r.nav.look_stand_done[80, 111] = False
+    unsearched[:] = False  # its wall feet were seen
+    assert decision._keep_search_goal(r.nav, s, near, dist, free, unsearched) == near
+
+
+def test_with_samples_missing_an_arm_tip_seen_from_6_m_is_still_a_frontier():
+    """Seed 38: the north-arm tip, with a sample in it, was called explored from 7.7 m."""
+    r = make_rover(pos=(110.0, 85.0), t=100.0)
+    r.worldmap[80:91, 130, 0], r.worldmap[80:91, 130, 2] = 255, 0  # the corridor ends at x 130
+    r.nav.seen_close[:] = False
+    r.pos, r.yaw = (123.5, 85.5), 0.0  # the tip's end wall 6.5 m ahead
+    decision.decision_step(r)
+    assert r.nav.seen_close[85, 130] and not r.nav.seen_near[85, 130]
+    s = decision._read_inputs(r)
+    assert decision._seen_for_frontiers(r.nav, s) is r.nav.seen_near
+    r.samples_remaining = 0
+    assert decision._seen_for_frontiers(r.nav, decision._read_inputs(r)) is r.nav.seen_close

@@ -380,6 +380,73 @@ def test_the_search_visits_an_unsearched_nook_beside_the_trail():
                                     np.zeros((200, 200), bool), dist)) == 0, "seen from close: searched"
 
 
+def _nook_behind_a_rock():
+    """Worldmap: floor x 130-159, y 100-114, wall north of it; a rock cell at (148, 114) south-west
+    of the wall foot (149, 115) (seeds 7 and 15's east nook, hidden behind rocks from the south-west)."""
+    wm = np.zeros((200, 200, 3), np.uint8)
+    wm[:, :, 0] = 255
+    wm[100:115, 130:160, 0], wm[100:115, 130:160, 2] = 0, 255
+    wm[114, 148, 0], wm[114, 148, 2] = 255, 0
+    return wm
+
+
+BEHIND_THE_ROCK = (147.2, 113.2)  # 3.3 m from the wall foot (149, 115), the rock between
+
+
+def test_a_rock_in_front_hides_the_nook_behind_it_from_the_search():
+    wm = _nook_behind_a_rock()
+    behind = np.zeros((200, 200), bool)
+    explore.mark_in_sight(behind, wm, BEHIND_THE_ROCK, 45.0, 4.0, 40.0)  # facing the wall foot
+    assert behind[114, 148], "the rock itself is seen"
+    assert not behind[115, 149], "the wall foot behind it is not"
+    assert behind[113, 149] and behind[115, 147], "floor and wall foot in the clear are"
+    clear = np.zeros((200, 200), bool)
+    explore.mark_in_sight(clear, wm, (149.5, 112.5), 90.0, 4.0, 40.0)  # south of it, facing it
+    assert clear[115, 149] and not clear[116, 149], "the wall foot is seen, not the wall 1 m behind it"
+    away = np.zeros((200, 200), bool)
+    explore.mark_in_sight(away, wm, (149.5, 112.5), 270.0, 4.0, 40.0)  # facing away
+    assert not away[113:, :].any()
+    explore.mark_in_sight(away, wm, (np.nan, 111.5), 90.0, 4.0, 40.0)  # bad pose: no change
+    explore.mark_in_sight(away, np.zeros((5, 5)), (148.5, 111.5), 90.0, 4.0, 40.0)  # bad map: no change
+    assert not away[113:, :].any()
+
+
+def test_a_rock_face_filling_the_frame_hides_what_the_map_calls_clear():
+    """Seed 15: the rock in front of the nook was mapped as floor; the camera, pressed against it,
+    saw no floor at all, and the nook behind must not count as searched."""
+    wm = _nook_behind_a_rock()
+    wm[114, 148, 0], wm[114, 148, 2] = 0, 255  # the rock mapped as floor
+    clear_map = np.zeros((200, 200), bool)
+    explore.mark_in_sight(clear_map, wm, BEHIND_THE_ROCK, 45.0, 4.0, 40.0)
+    assert clear_map[115, 149], "by the map alone the wall foot is in sight"
+    n = int(round(2 * reactive.FOV_HALF_DEG / reactive.BIN_DEG))
+    blind = np.zeros((200, 200), bool)
+    explore.mark_in_sight(blind, wm, BEHIND_THE_ROCK, 45.0, 4.0, 40.0, np.zeros(n))  # the frame shows no floor
+    assert not blind[115, 149] and not blind[114, 149] and blind.any()
+    seen = np.zeros((200, 200), bool)
+    explore.mark_in_sight(seen, wm, BEHIND_THE_ROCK, 45.0, 4.0, 40.0, np.full(n, 4.0))  # floor seen 4 m out
+    assert (seen == clear_map).all()
+
+
+def test_a_look_stand_once_used_gives_way_to_another_stand_and_blind_feet_are_given_up():
+    free, obstacle, looked = _nook_seen_from_afar()
+    feet = explore.unsearched_wall_feet(free, obstacle, looked)
+    dist, _ = astar.distance_field(grid.cost_grid(free, obstacle), (111, 125))
+    visited = np.zeros((200, 200), bool)
+    visited[113, 120:180] = True
+    done, stand_done = np.zeros((200, 200), bool), np.zeros((200, 200), bool)
+    first = explore.nearest_target(explore.look_targets(feet, free, visited, done, dist, stand_done))
+    explore.ignore_disc(stand_done, first, explore.LOOK_STAND_DONE_M)
+    second = explore.nearest_target(explore.look_targets(feet, free, visited, done, dist, stand_done))
+    assert second is not None and second != first and second[0] == 110, "another stand beside the nook"
+    tries = np.zeros((200, 200), np.int16)
+    at = (first[1] + 0.5, first[0] + 0.5)
+    explore.give_up_faced(tries, done, feet, at)
+    assert not done[109, 147:150].any() and tries[109, 148] == 1
+    explore.give_up_faced(tries, done, feet, at)
+    assert done[109, 147:150].all() and not done[105, 148], "unseen after LOOK_TRIES looks: given up; out of reach untouched"
+
+
 def _feet_at(bearing_deg, dist_m, pos=(16.7, 98.3)):
     """A 3x3 patch of unsearched wall feet dist_m from pos at world bearing bearing_deg."""
     feet = np.zeros((200, 200), bool)
