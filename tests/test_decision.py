@@ -531,7 +531,7 @@ def test_with_samples_missing_an_arm_tip_seen_from_6_m_is_still_a_frontier():
     r = make_rover(pos=(110.0, 85.0), t=100.0)
     r.worldmap[80:91, 130, 0], r.worldmap[80:91, 130, 2] = 255, 0  # the corridor ends at x 130
     r.nav.seen_close[:] = False
-    r.pos, r.yaw = (123.5, 85.5), 0.0  # the tip's end wall 6.5 m ahead
+    r.pos, r.yaw = (123.5, 85.5), 0.0  # the tip's end wall 7 m ahead: seen from close, not from near
     decision.decision_step(r)
     assert r.nav.seen_close[85, 130] and not r.nav.seen_near[85, 130]
     s = decision._read_inputs(r)
