@@ -265,6 +265,10 @@ def _array(x):
 
 def _pair(a_name, d_name, rover):
     a, d = _array(getattr(rover, a_name, ())), _array(getattr(rover, d_name, ()))
+    if a.size == d.size:  # the usual frame: equal lengths, all finite -> the arrays as they are, no masked copies
+        ok = np.isfinite(a)
+        ok &= np.isfinite(d)
+        return (a, d) if ok.all() else (a[ok], d[ok])
     n = min(a.size, d.size)
     a, d = a[:n], d[:n]
     ok = np.isfinite(a) & np.isfinite(d)
@@ -371,9 +375,9 @@ def _register_collection(nav, s):
 
 def _apply(rover, nav, mode, cmd, t):
     """Clamp, de-NaN and write the commands; remember them for the stuck monitor."""
-    throttle = float(np.clip(_finite(cmd.throttle), -1.0, 1.0))
-    brake = float(np.clip(_finite(cmd.brake, BRAKE_STOP), 0.0, MAX_BRAKE))
-    steer = float(np.clip(_finite(cmd.steer), -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
+    throttle = pursuit.clamp(_finite(cmd.throttle), -1.0, 1.0)
+    brake = pursuit.clamp(_finite(cmd.brake, BRAKE_STOP), 0.0, MAX_BRAKE)
+    steer = pursuit.clamp(_finite(cmd.steer), -STEER_LIMIT_DEG, STEER_LIMIT_DEG)
     rover.throttle, rover.brake, rover.steer = throttle, brake, steer
     rover.send_pickup = bool(cmd.pickup)
     if mode != nav.mode:

@@ -65,6 +65,10 @@ def _seen_offsets():
 
 
 _SEEN_DY, _SEEN_DX = _seen_offsets()
+_SEEN_R = int(np.ceil(SEEN_CLOSE_M))  # largest offset from the rover's cell, cells
+_SEEN_RNG = np.hypot(_SEEN_DX, _SEEN_DY)  # distance of each offset, cells
+_SEEN_NEAR = _SEEN_RNG <= 1.5  # offsets marked whatever the heading (under the rover)
+_SEEN_HALF_FOV_RAD = np.radians(SEEN_HALF_FOV_DEG)
 
 
 def mark_seen_close(seen, pos, yaw_deg, radius_m=SEEN_CLOSE_M):
@@ -76,14 +80,23 @@ def mark_seen_close(seen, pos, yaw_deg, radius_m=SEEN_CLOSE_M):
     """
     if not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
         return seen
-    cx, cy = pos[0] - 0.5, pos[1] - 0.5
-    ang = np.arctan2(_SEEN_DY + (np.round(cy) - cy), _SEEN_DX + (np.round(cx) - cx)) - np.radians(yaw_deg)
-    ang = (ang + np.pi) % (2 * np.pi) - np.pi
-    rng = np.hypot(_SEEN_DX, _SEEN_DY)
-    keep = ((np.abs(ang) <= np.radians(SEEN_HALF_FOV_DEG)) & (rng <= radius_m)) | (rng <= 1.5)
-    rows = (np.round(cy) + _SEEN_DY[keep]).astype(np.int64)
-    cols = (np.round(cx) + _SEEN_DX[keep]).astype(np.int64)
-    ok = (rows >= 0) & (rows < seen.shape[0]) & (cols >= 0) & (cols < seen.shape[1])
+    cx, cy = float(pos[0]) - 0.5, float(pos[1]) - 0.5
+    rx, ry = round(cx), round(cy)  # the cell under the rover (half to even, as np.round)
+    ang = np.arctan2(_SEEN_DY + (ry - cy), _SEEN_DX + (rx - cx))
+    ang -= np.radians(yaw_deg)
+    ang += np.pi
+    ang %= 2 * np.pi
+    ang -= np.pi
+    keep = np.abs(ang) <= _SEEN_HALF_FOV_RAD
+    keep &= _SEEN_RNG <= radius_m
+    keep |= _SEEN_NEAR
+    h, w = seen.shape
+    if _SEEN_R <= ry < h - _SEEN_R and _SEEN_R <= rx < w - _SEEN_R and seen.flags.c_contiguous:
+        seen.reshape(-1)[ry * w + rx + (_SEEN_DY[keep] * w + _SEEN_DX[keep]).astype(np.int64)] = True  # all inside
+        return seen
+    rows = (ry + _SEEN_DY[keep]).astype(np.int64)
+    cols = (rx + _SEEN_DX[keep]).astype(np.int64)
+    ok = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
     seen[rows[ok], cols[ok]] = True
     return seen
 

@@ -6,6 +6,8 @@ sand in shadow stays obstacle) plus the decision layer's memory of cells
 where the rover got stuck. Costs grow near obstacles so planned paths keep to
 the middle of the canyons, where the rover sees both walls and rarely scrapes.
 """
+import math
+
 import cv2
 import numpy as np
 
@@ -94,10 +96,10 @@ def cost_grid(free, obstacle, blocked=None, allow_unknown=False, soft_obstacles=
 def world_to_cell(xy):
     """World (x, y) metres -> (row, col) cell, clipped to the grid; None for NaN."""
     x, y = float(xy[0]), float(xy[1])
-    if not (np.isfinite(x) and np.isfinite(y)):
+    if not (math.isfinite(x) and math.isfinite(y)):
         return None
-    col = int(np.clip(np.floor(x), 0, GRID_SIZE - 1))
-    row = int(np.clip(np.floor(y), 0, GRID_SIZE - 1))
+    col = min(max(math.floor(x), 0), GRID_SIZE - 1)  # plain ints (called every frame; NumPy scalars cost more)
+    row = min(max(math.floor(y), 0), GRID_SIZE - 1)
     return row, col
 
 

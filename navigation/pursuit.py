@@ -16,6 +16,16 @@ LOOKAHEAD_MAX_M = 6.0  # longest pursuit lookahead, m
 LOOKAHEAD_PER_MPS = 0.8  # extra lookahead per m/s of speed, s
 
 
+def clamp(x, lo, hi):
+    """float(np.clip(x, lo, hi)) for a scalar without NumPy's per-call overhead (several calls a frame): the
+    same comparisons as NumPy's float clip, so NaN passes through and a -0.0 at a 0.0 bound stays -0.0."""
+    x = float(x)
+    if x != x:
+        return x
+    x = float(lo) if x < lo else x
+    return float(hi) if x > hi else x
+
+
 def wrap_angle(a):
     """Wrap radians to (-pi, pi]."""
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
@@ -33,7 +43,7 @@ def steer_for_curvature(curvature, speed):
         return 0.0
     wheel = np.degrees(np.arctan(WHEELBASE_M * curvature))
     cmd = STEER_LIMIT_DEG * wheel / wheel_lock_deg(speed)
-    return float(np.clip(cmd, -STEER_LIMIT_DEG, STEER_LIMIT_DEG))
+    return clamp(cmd, -STEER_LIMIT_DEG, STEER_LIMIT_DEG)
 
 
 def bearing(pos, yaw_deg, point):
@@ -44,7 +54,7 @@ def bearing(pos, yaw_deg, point):
 
 def lookahead_for_speed(speed):
     """Pursuit lookahead distance for the current speed, m."""
-    return float(np.clip(LOOKAHEAD_MIN_M + LOOKAHEAD_PER_MPS * abs(speed), LOOKAHEAD_MIN_M, LOOKAHEAD_MAX_M))
+    return clamp(LOOKAHEAD_MIN_M + LOOKAHEAD_PER_MPS * abs(speed), LOOKAHEAD_MIN_M, LOOKAHEAD_MAX_M)
 
 
 def closest_index(path_xy, pos, start=0):

@@ -353,12 +353,19 @@ class RockField:
     def __init__(self, patches: list):
         self.patches = patches
         self._bounds = np.array([p.bounds for p in patches], dtype=np.float64).reshape(-1, 4)
+        self._last_near = (None, None)  # ((x, y, radius), patches) of the last near() call
 
     def near(self, x: float, y: float, radius: float) -> list:
-        """Patches whose extent comes within `radius` of (x, y)."""
+        """Patches whose extent comes within `radius` of (x, y) (a new list; the physics asks twice per step
+        at the same point, so the last answer is kept)."""
+        key, found = self._last_near
+        if key == (x, y, radius):
+            return list(found)
         b = self._bounds
         hit = (b[:, 0] - radius <= x) & (x <= b[:, 2] + radius) & (b[:, 1] - radius <= y) & (y <= b[:, 3] + radius)
-        return [self.patches[i] for i in np.nonzero(hit)[0]]
+        found = [self.patches[i] for i in np.nonzero(hit)[0]]
+        self._last_near = ((x, y, radius), found)
+        return list(found)
 
     @staticmethod
     def query(patches: list, px: np.ndarray, py: np.ndarray):

@@ -98,14 +98,15 @@ class TyreTracks:
 
     def __init__(self, world=None):
         self.world = world  # for the surface height under a wheel (None: flat ground at 0 m)
-        self._wheels = [[], []]  # per rear wheel (left, right): [(x, y, z, yaw_rad), ...]
-        self._last = [None, None]  # where each wheel laid its last quad, (x, y)
-        self._quads = None  # cached (N, 4) array, None when stale
+        self.clear()
 
     def clear(self) -> None:
-        self._wheels = [[], []]
-        self._last = [None, None]
-        self._quads = None
+        # per rear wheel (left, right): rows (x, y, z, yaw_rad) oldest first in a fixed buffer, and how many are
+        # kept (appending a row costs no rebuild of a list of tuples as an array every frame a quad is laid)
+        self._wheels = [np.empty((MAX_QUADS_PER_WHEEL + 1, 4)), np.empty((MAX_QUADS_PER_WHEEL + 1, 4))]
+        self._counts = [0, 0]
+        self._last = [None, None]  # where each wheel laid its last quad, (x, y)
+        self._quads = None  # cached (N, 4) array, None when stale
 
     @staticmethod
     def wheel_positions(x, y, yaw_deg):
@@ -127,11 +128,14 @@ class TyreTracks:
                 continue
             if not grounded[i]:
                 continue
-            quads = self._wheels[i]
-            quads.append((wx, wy, self._surface(wx, wy) + LIFT_M, yaw))
+            buf, n = self._wheels[i], self._counts[i]
+            buf[n] = (wx, wy, self._surface(wx, wy) + LIFT_M, yaw)
+            n += 1
+            if n > MAX_QUADS_PER_WHEEL:
+                buf[:n - TRIM_BATCH] = buf[TRIM_BATCH:n].copy()
+                n -= TRIM_BATCH
+            self._counts[i] = n
             self._last[i] = (wx, wy)
-            if len(quads) > MAX_QUADS_PER_WHEEL:
-                del quads[:TRIM_BATCH]
             self._quads = None
         return self
 
@@ -148,14 +152,14 @@ class TyreTracks:
 
     def counts(self):
         """Quads kept per wheel (left, right)."""
-        return tuple(len(q) for q in self._wheels)
+        return tuple(self._counts)
 
     @property
     def quads(self) -> np.ndarray:
         """float64 (N, 4): centre x, y, z (surface + LIFT_M) and yaw (rad) of every kept quad."""
         if self._quads is None:
-            rows = self._wheels[0] + self._wheels[1]
-            self._quads = np.array(rows, np.float64).reshape(-1, 4)
+            (left, right), (n_left, n_right) = self._wheels, self._counts
+            self._quads = np.concatenate((left[:n_left], right[:n_right]))
         return self._quads
 
 
