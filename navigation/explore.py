@@ -492,7 +492,7 @@ class LoopDetector:
         self._last_yaw = None
 
     def update(self, t, pos, yaw_deg):
-        if not (np.isfinite(t) and np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
+        if not (math.isfinite(t) and math.isfinite(pos[0]) and math.isfinite(pos[1]) and math.isfinite(yaw_deg)):
             return False
         if self._last_yaw is None:
             self._unwrapped = float(yaw_deg)
