@@ -64,11 +64,18 @@ def _seen_offsets():
     return dy[keep].astype(np.float64), dx[keep].astype(np.float64)
 
 
-_SEEN_DY, _SEEN_DX = _seen_offsets()
-_SEEN_R = int(np.ceil(SEEN_CLOSE_M))  # largest offset from the rover's cell, cells
-_SEEN_RNG = np.hypot(_SEEN_DX, _SEEN_DY)  # distance of each offset, cells
-_SEEN_NEAR = _SEEN_RNG <= 1.5  # offsets marked whatever the heading (under the rover)
-_SEEN_HALF_FOV_RAD = np.radians(SEEN_HALF_FOV_DEG)
+def _build_tables():
+    """mark_seen_close's offset tables from SEEN_CLOSE_M and SEEN_HALF_FOV_DEG (sim.sweep calls this again
+    after it sets either constant)."""
+    global _SEEN_DY, _SEEN_DX, _SEEN_R, _SEEN_RNG, _SEEN_NEAR, _SEEN_HALF_FOV_RAD
+    _SEEN_DY, _SEEN_DX = _seen_offsets()
+    _SEEN_R = int(np.ceil(SEEN_CLOSE_M))  # largest offset from the rover's cell, cells
+    _SEEN_RNG = np.hypot(_SEEN_DX, _SEEN_DY)  # distance of each offset, cells
+    _SEEN_NEAR = _SEEN_RNG <= 1.5  # offsets marked whatever the heading (under the rover)
+    _SEEN_HALF_FOV_RAD = np.radians(SEEN_HALF_FOV_DEG)
+
+
+_build_tables()
 
 
 def mark_seen_close(seen, pos, yaw_deg, radius_m=SEEN_CLOSE_M):

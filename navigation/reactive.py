@@ -20,10 +20,19 @@ CLEAR_REACH_M = 3.0  # reach at which a heading counts as fully clear, m
 TURN_PENALTY_M_PER_RAD = 2.0  # reach given up per radian of deviation from the wanted heading, m/rad
 
 
+_CENTRES = {}  # (FOV_HALF_DEG, BIN_DEG) -> read-only bin centres (asked for every driving frame)
+
+
 def bin_centres():
-    """Centres of the profile's bins, radians."""
-    n = int(round(2 * FOV_HALF_DEG / BIN_DEG))
-    return np.radians(-FOV_HALF_DEG + BIN_DEG * (np.arange(n) + 0.5))
+    """Centres of the profile's bins, radians (read-only)."""
+    key = (FOV_HALF_DEG, BIN_DEG)
+    centres = _CENTRES.get(key)
+    if centres is None:
+        n = int(round(2 * FOV_HALF_DEG / BIN_DEG))
+        centres = np.radians(-FOV_HALF_DEG + BIN_DEG * (np.arange(n) + 0.5))
+        centres.flags.writeable = False
+        _CENTRES[key] = centres
+    return centres
 
 
 def _bin_index(angles):
