@@ -391,6 +391,28 @@ def test_rock_colliders_come_from_the_collider_shapes(real_world):
     assert len(pillars) == 2 and min(q.x0 for q in pillars) < 0.0
 
 
+def test_compiled_rock_query_equals_the_numpy_reference_bit_for_bit(real_world):
+    """RockField.query's compiled path gives the very bits of query_numpy (points on and around every patch,
+    cell centres and half-cell edges included, NaN too); a changed slab changes both."""
+    field = C.rock_field_for(real_world)
+    rng = np.random.default_rng(3)
+    for p in field.patches:
+        x0, y0, x1, y1 = p.bounds
+        px = np.concatenate([rng.uniform(x0 - 1.0, x1 + 1.0, 300), x0 + p.cell * (np.arange(40) * 0.5 - 0.5), [np.nan]])
+        py = np.concatenate([rng.uniform(y0 - 1.0, y1 + 1.0, 300), y0 + p.cell * (np.arange(40) * 0.5 - 0.5), [y0]])
+        near = field.near(0.5 * (x0 + x1), 0.5 * (y0 + y1), 0.5 * max(x1 - x0, y1 - y0) + 1.0)
+        with np.errstate(invalid="ignore"):  # NumPy casts the NaN point to an index (out of range, so unused)
+            fast, ref = C.RockField.query(near, px, py), C.RockField.query_numpy(near, px, py)
+        for a, b in zip(fast, ref):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    p = field.patches[0]
+    x0, y0, x1, y1 = p.bounds
+    pt = (np.array([0.5 * (x0 + x1)]), np.array([0.5 * (y0 + y1)]))
+    changed = C.Patch(p.name, p.x0, p.y0, p.cell, p.bottom, p.top + np.float32(1.0), p.depth, p.ex, p.ey)
+    assert C.RockField.query([changed], *pt)[1][0] == C.RockField.query_numpy([changed], *pt)[1][0]
+    assert C.RockField.query([changed], *pt)[1][0] != C.RockField.query([p], *pt)[1][0]
+
+
 def test_real_world_rocks_and_wall_slopes_stop_the_rover(real_world):
     world = real_world
     sx, sy = world.start_xy
