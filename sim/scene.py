@@ -129,6 +129,13 @@ class World:
 
     def rock_span_at(self, x, y):
         """(bottom, top) of rock at the nearest 0.1 m cell, m; (0, 0) where there is no rock."""
+        if type(x) is float and type(y) is float and math.isfinite(x) and math.isfinite(y):
+            # one finite point (tyre tracks ask per laid quad): the same clamp, half-to-even rounding and clip
+            # as _rock_index, in plain Python
+            n = self.rock_top.shape[0] - 1
+            c = min(max(round(min(max(x, 0.0), self.size_m) / self.rock_cell_m), 0), n)
+            r = min(max(round(min(max(y, 0.0), self.size_m) / self.rock_cell_m), 0), n)
+            return float(self.rock_bottom[r, c]), float(self.rock_top[r, c])
         r, c = self._rock_index(x, y)
         bottom, top = self.rock_bottom[r, c], self.rock_top[r, c]
         if np.ndim(bottom) == 0:
