@@ -28,8 +28,9 @@ re-derived from the map, not from a script.
 """
 import logging
 import math
+import operator
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -145,6 +146,7 @@ class Inputs:
     picking_up: bool
     samples_remaining: object  # int or None
     home_by: Optional[float] = None  # return deadline set for this mission (RoverState.home_by_s), s; None: the default
+    reach: Optional[np.ndarray] = field(default=None, repr=False, compare=False)  # _frame_reach's, once computed
 
 
 @dataclass
@@ -300,6 +302,15 @@ def _read_inputs(rover):
     )
 
 
+def _frame_reach(s):
+    """This frame's reactive.reach_profile of the camera's pixels, read-only, computed once per Inputs (the
+    line-of-sight bookkeeping and the driving modes both ask for it)."""
+    if s.reach is None:
+        s.reach = reactive.reach_profile(s.nav_angles, s.nav_dists, s.obs_angles, s.obs_dists)
+        s.reach.flags.writeable = False
+    return s.reach
+
+
 def _given_home_by(rover):
     """The rover's own return deadline when it has a usable one (a positive number), else None."""
     v = _finite(getattr(rover, "home_by_s", None))
@@ -340,7 +351,7 @@ def _update_memory(rover, nav, s):
         if s.samples_remaining is None or s.samples_remaining > 0:
             explore.mark_in_sight(nav.in_sight, getattr(rover, "worldmap", None), s.pos, s.yaw,
                                   explore.SEARCH_LOOK_M, perception.LOOK_HALF_ANGLE_DEG,
-                                  reactive.reach_profile(s.nav_angles, s.nav_dists, s.obs_angles, s.obs_dists))
+                                  _frame_reach(s))
     # a pickup that just finished, or a sample count that dropped, means a collection
     finished = nav.was_picking and not s.picking_up
     dropped = (nav.last_remaining is not None and s.samples_remaining is not None
@@ -455,10 +466,13 @@ def _check_spinning(nav, s, mode):
     nav.spin_hist.clear()
 
 
+_SECOND = operator.itemgetter(1)  # an entry's turning-in-place flag
+
+
 def _stop_share(hist):
     """Share of (t, turning in place?, x, y) entries turning in place (plain Python on the ~600 entries:
     the same float64 value as the NumPy mean of the 0/1 column, without building an array every frame)."""
-    return sum(1 for entry in hist if entry[1]) / len(hist)
+    return sum(map(_SECOND, hist)) / len(hist)  # True counts 1 (a C-level pass over the deque)
 
 
 def _span(hist, col_x, col_y):
@@ -870,7 +884,7 @@ def _drive_heading(nav, s, alpha, max_speed, planned=False):
             _start_rotation(nav, s, s.yaw + math.degrees(alpha), "leave-pickup")
             return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
         nav.leaving_pickup = False
-    reach = reactive.reach_profile(s.nav_angles, s.nav_dists, s.obs_angles, s.obs_dists)
+    reach = _frame_reach(s)
     heading, clear = reactive.choose_heading(reach, alpha)
     if clear < REACH_STOP_M and planned:
         steer = pursuit.steer_for_curvature(2.0 * math.sin(alpha) / pursuit.LOOKAHEAD_MIN_M, s.vel)
