@@ -67,12 +67,13 @@ def _seen_offsets():
 def _build_tables():
     """mark_seen_close's offset tables from SEEN_CLOSE_M and SEEN_HALF_FOV_DEG (sim.sweep calls this again
     after it sets either constant)."""
-    global _SEEN_DY, _SEEN_DX, _SEEN_R, _SEEN_RNG, _SEEN_NEAR, _SEEN_HALF_FOV_RAD
+    global _SEEN_DY, _SEEN_DX, _SEEN_R, _SEEN_RNG, _SEEN_NEAR, _SEEN_HALF_FOV_RAD, _LAST_VIEW
     _SEEN_DY, _SEEN_DX = _seen_offsets()
     _SEEN_R = int(np.ceil(SEEN_CLOSE_M))  # largest offset from the rover's cell, cells
     _SEEN_RNG = np.hypot(_SEEN_DX, _SEEN_DY)  # distance of each offset, cells
     _SEEN_NEAR = _SEEN_RNG <= 1.5  # offsets marked whatever the heading (under the rover)
     _SEEN_HALF_FOV_RAD = np.radians(SEEN_HALF_FOV_DEG)
+    _LAST_VIEW = (None, None)  # ((x, y, yaw, type of yaw), offsets within the camera's half-angle) of the last call
 
 
 _build_tables()
@@ -85,17 +86,22 @@ def mark_seen_close(seen, pos, yaw_deg, radius_m=SEEN_CLOSE_M):
     view); such cells stay 'unconfirmed' and keep pulling exploration until
     the rover has looked at them from close.
     """
+    global _LAST_VIEW
     if not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
         return seen
     cx, cy = float(pos[0]) - 0.5, float(pos[1]) - 0.5
     rx, ry = round(cx), round(cy)  # the cell under the rover (half to even, as np.round)
-    ang = np.arctan2(_SEEN_DY + (ry - cy), _SEEN_DX + (rx - cx))
-    ang -= np.radians(yaw_deg)
-    ang += np.pi
-    ang %= 2 * np.pi
-    ang -= np.pi
-    keep = np.abs(ang) <= _SEEN_HALF_FOV_RAD
-    keep &= _SEEN_RNG <= radius_m
+    key = (cx, cy, yaw_deg, type(yaw_deg))
+    last_key, in_view = _LAST_VIEW  # one tuple, read and replaced whole
+    if last_key != key:  # a new pose (decision marks two maps a frame from the same one: the same angles)
+        ang = np.arctan2(_SEEN_DY + (ry - cy), _SEEN_DX + (rx - cx))
+        ang -= np.radians(yaw_deg)
+        ang += np.pi
+        ang %= 2 * np.pi
+        ang -= np.pi
+        in_view = np.abs(ang) <= _SEEN_HALF_FOV_RAD
+        _LAST_VIEW = (key, in_view)
+    keep = in_view & (_SEEN_RNG <= radius_m)
     keep |= _SEEN_NEAR
     h, w = seen.shape
     if _SEEN_R <= ry < h - _SEEN_R and _SEEN_R <= rx < w - _SEEN_R and seen.flags.c_contiguous:
