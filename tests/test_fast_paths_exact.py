@@ -216,3 +216,17 @@ def test_polar_outputs_equal_the_masked_tables():
         ref = (P._GRID_ANGLE[nav], P._GRID_DIST[nav], P._GRID_ANGLE[obs], P._GRID_DIST[obs])
         for a, b in zip(P._polar_outputs(grid), ref):
             assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+def test_scalar_clamp_equals_numpy_clip_bit_for_bit():
+    """navigation.pursuit.clamp (decision's command clamps, steering and lookahead) gives float(np.clip)'s very
+    value, signed zeros at a 0 bound and NaN included, and a plain float."""
+    from navigation.pursuit import clamp
+
+    values = [-0.0, 0.0, 1.0, -1.0, 15.0, -15.0, 15.000001, math.inf, -math.inf, math.nan, 5e-324, -5e-324,
+              np.float32(-2.5), np.float64(3.25)] + list(np.random.default_rng(0).normal(0.0, 10.0, 500))
+    for lo, hi in ((-1.0, 1.0), (0.0, 1.0), (-15.0, 15.0), (2.0, 6.0), (-0.0, 0.0)):
+        for v in values:
+            want, got = float(np.clip(v, lo, hi)), clamp(v, lo, hi)
+            assert type(got) is float
+            assert (math.isnan(want) and math.isnan(got)) or (want == got and math.copysign(1, want) == math.copysign(1, got))
