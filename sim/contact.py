@@ -369,6 +369,12 @@ class RockField:
         return list(found)
 
     @staticmethod
+    def no_rock(shape):
+        """(bottom, top, depth, ex, ey) of points no patch covers: what query starts from before the patches."""
+        return (np.full(shape, NO_ROCK_BOTTOM), np.full(shape, NO_ROCK_TOP), np.full(shape, -1.0),
+                np.zeros(shape), np.zeros(shape))
+
+    @staticmethod
     def query(patches: list, px: np.ndarray, py: np.ndarray):
         """(bottom, top, depth, ex, ey) at the points from the given patches.
 
@@ -381,11 +387,7 @@ class RockField:
                 and py.dtype == np.float64 and px.shape == py.shape):
             return RockField.query_numpy(patches, px, py)
         xs, ys = np.ascontiguousarray(px).reshape(-1), np.ascontiguousarray(py).reshape(-1)
-        bottom = np.full(xs.size, NO_ROCK_BOTTOM)
-        top = np.full(xs.size, NO_ROCK_TOP)
-        depth = np.full(xs.size, -1.0)
-        ex = np.zeros(xs.size)
-        ey = np.zeros(xs.size)
+        bottom, top, depth, ex, ey = RockField.no_rock(xs.size)
         for p in patches:
             _query_patch(xs, ys, p.x0, p.y0, p.cell, p.bottom, p.top, p.depth, p.ex, p.ey, bottom, top, depth, ex, ey)
         shape = px.shape
@@ -394,11 +396,7 @@ class RockField:
     @staticmethod
     def query_numpy(patches: list, px: np.ndarray, py: np.ndarray):
         """query in NumPy (any broadcastable inputs; the reference the compiled path is tested against)."""
-        bottom = np.full(px.shape, NO_ROCK_BOTTOM)
-        top = np.full(px.shape, NO_ROCK_TOP)
-        depth = np.full(px.shape, -1.0)
-        ex = np.zeros(px.shape)
-        ey = np.zeros(px.shape)
+        bottom, top, depth, ex, ey = RockField.no_rock(px.shape)
         for p in patches:
             h, w = p.top.shape
             fx, fy = (px - p.x0) / p.cell, (py - p.y0) / p.cell
