@@ -302,6 +302,11 @@ def _read_inputs(rover):
     )
 
 
+def _samples_missing(s):
+    """Whether samples may still be out there (an unknown count counts as missing)."""
+    return s.samples_remaining is None or s.samples_remaining > 0
+
+
 def _frame_reach(s):
     """This frame's reactive.reach_profile of the camera's pixels, read-only, computed once per Inputs (the
     line-of-sight bookkeeping and the driving modes both ask for it)."""
@@ -346,9 +351,8 @@ def _update_memory(rover, nav, s):
         nav.visits.update(s.t, grid.world_to_cell(s.pos))
         nav.loops.update(s.t, s.pos, s.yaw)
         explore.mark_seen_close(nav.seen_close, s.pos, s.yaw)
-        if s.samples_remaining is None or s.samples_remaining > 0:
+        if _samples_missing(s):
             explore.mark_seen_close(nav.seen_near, s.pos, s.yaw, explore.SEEN_CLOSE_SAMPLES_M)
-        if s.samples_remaining is None or s.samples_remaining > 0:
             explore.mark_in_sight(nav.in_sight, getattr(rover, "worldmap", None), s.pos, s.yaw,
                                   explore.SEARCH_LOOK_M, perception.LOOK_HALF_ANGLE_DEG,
                                   _frame_reach(s))
@@ -856,8 +860,7 @@ def _start_rotation(nav, s, heading_deg, reason):
     nav.rotate_heading = float(heading_deg) % 360.0
     nav.rotate_since = s.t
     nav.rotate_dir = None
-    missing = s.samples_remaining is None or s.samples_remaining > 0
-    if reason in SWEEP_REASONS and missing and nav.unsearched is not None:
+    if reason in SWEEP_REASONS and _samples_missing(s) and nav.unsearched is not None:
         way = explore.sweep_direction(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
         if way * predict.wrap_deg(nav.rotate_heading - s.yaw) < 0:
             nav.rotate_dir = way
@@ -1036,12 +1039,7 @@ def _plan_explore(rover, nav, s):
     free, obstacle, unknown = _grids(rover)
     _remember_unsearched(rover, nav, s, free, obstacle)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
-    targets, cost, parent, dist = [], None, None, None
-    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
-        dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
-        targets = explore.frontier_targets(mask, dist)
-        if len(targets):
-            break
+    targets, cost, parent, dist = _frontier_targets(rover, nav, s, free, obstacle, mask)
     nav.frontier_count = len(targets)
     current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "frontier" else None
     committed = current is not None and s.t - nav.goal_since < FRONTIER_COMMIT_S
@@ -1119,7 +1117,7 @@ def _remember_unsearched(rover, nav, s, free, obstacle, frame_maps=None):
     """Unsearched wall feet now (see _unsearched_wall_feet), kept in nav for the turns in place
     until the next plan; None is kept once every sample is in."""
     unsearched = _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle)
-    nav.unsearched = unsearched if s.samples_remaining is None or s.samples_remaining > 0 else None
+    nav.unsearched = unsearched if _samples_missing(s) else None
     return unsearched
 
 
@@ -1267,18 +1265,24 @@ def _seen_for_frontiers(nav, s):
     are missing (an arm's tip or a side pocket may hold one; small samples show from 3-5 m), from
     SEEN_CLOSE_M once all are in (the map alone is done sooner: seed 1 took 612 s instead of 507 s
     exploring at 5 m after its sixth sample)."""
-    missing = s.samples_remaining is None or s.samples_remaining > 0
-    return nav.seen_near if missing else nav.seen_close
+    return nav.seen_near if _samples_missing(s) else nav.seen_close
+
+
+def _frontier_targets(rover, nav, s, free, obstacle, mask):
+    """(targets, cost, parent, dist): the reachable frontier clusters of `mask` under the first cost grid
+    that reaches any (explore.frontier_targets), with that grid and its distance field; the last grid's
+    when none does (no grid: [], None, None, None)."""
+    targets, cost, parent, dist = [], None, None, None
+    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
+        dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
+        targets = explore.frontier_targets(mask, dist)
+        if len(targets):
+            break
+    return targets, cost, parent, dist
 
 
 def _frontier_reachable(rover, nav, s):
-    """Any reachable frontier cluster on today's map (the same test as _plan_explore's)."""
+    """Any reachable frontier cluster on today's map (_plan_explore's test)."""
     free, obstacle, unknown = _grids(rover)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
-    if not mask.any():
-        return False
-    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
-        dist, _parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
-        if len(explore.frontier_targets(mask, dist)):
-            return True
-    return False
+    return bool(mask.any()) and len(_frontier_targets(rover, nav, s, free, obstacle, mask)[0]) > 0

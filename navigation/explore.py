@@ -367,6 +367,14 @@ def look_targets(unsearched, free, visited, done, dist, stand_done=None):
     return _first_per_cluster(rows, cols, lab, d, stats, np.lexsort((d, lab)))
 
 
+def _window(shape, pos, radius_m):
+    """(y0, y1, x0, x1): the grid rows and columns, clipped to shape, of a square holding every cell
+    within radius_m of pos (may be empty when pos is off the grid)."""
+    r = int(np.ceil(radius_m)) + 1
+    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
+    return max(cy - r, 0), min(cy + r + 1, shape[0]), max(cx - r, 0), min(cx + r + 1, shape[1])
+
+
 def give_up_faced(tries, done, unsearched, pos, radius_m=SEARCH_FACE_RADIUS_M, max_tries=LOOK_TRIES):
     """Count one more look at the unsearched cells within radius_m of pos (in `tries`, int array) and
     add those looked at max_tries times to `done` (both in place). Returns done.
@@ -375,10 +383,7 @@ def give_up_faced(tries, done, unsearched, pos, radius_m=SEARCH_FACE_RADIUS_M, m
     behind a rock the nook stayed hidden and was never looked at again (seeds 7 and 15)."""
     if not (np.isfinite(pos[0]) and np.isfinite(pos[1])):
         return done
-    r = int(np.ceil(radius_m)) + 1
-    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
-    y0, y1 = max(cy - r, 0), min(cy + r + 1, unsearched.shape[0])
-    x0, x1 = max(cx - r, 0), min(cx + r + 1, unsearched.shape[1])
+    y0, y1, x0, x1 = _window(unsearched.shape, pos, radius_m)
     if y0 >= y1 or x0 >= x1:
         return done
     ys, xs = np.mgrid[y0:y1, x0:x1]
@@ -391,10 +396,7 @@ def give_up_faced(tries, done, unsearched, pos, radius_m=SEARCH_FACE_RADIUS_M, m
 def _unsearched_offsets_within(unsearched, pos, radius_m):
     """(dx, dy) in metres from pos to the centre of every unsearched cell within radius_m: the cells
     a turn in place at pos could bring into view (face_heading and sweep_direction)."""
-    r = int(np.ceil(radius_m)) + 1
-    cy, cx = int(np.floor(pos[1])), int(np.floor(pos[0]))
-    y0, y1 = max(cy - r, 0), min(cy + r + 1, unsearched.shape[0])
-    x0, x1 = max(cx - r, 0), min(cx + r + 1, unsearched.shape[1])
+    y0, y1, x0, x1 = _window(unsearched.shape, pos, radius_m)
     rows, cols = np.nonzero(unsearched[y0:y1, x0:x1])
     dx, dy = cols + x0 + 0.5 - pos[0], rows + y0 + 0.5 - pos[1]
     near = np.hypot(dx, dy) <= radius_m
