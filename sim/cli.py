@@ -161,13 +161,13 @@ def parse_with_logging(parser: argparse.ArgumentParser, argv=None) -> argparse.N
 def add_shadows_option(parser: argparse.ArgumentParser):
     """--shadows on|off: the simulator's graphics quality decides whether terrain casts shadows.
 
-    Off by default: the held-out real drives (megalphian, royalejandro) show no cast shadows;
-    only test_dataset does.
+    Off by default, as the twin issue asks and as megalphian shows; royalejandro, dimaga and
+    test_dataset do show cast shadows (docs/twin-realism.md, round 3), so both are evaluated.
     """
     parser.add_argument("--shadows", choices=("on", "off"), default="off",
                         help="terrain cast shadows as at the simulator's Simple..Fantastic quality (on, "
-                             "as in test_dataset) or none as at Fastest/Fast (off, the default, as in the "
-                             "megalphian and royalejandro drives)")
+                             "as in the test_dataset, royalejandro and dimaga drives) or none as at "
+                             "Fastest/Fast (off, the default, as in the megalphian drive)")
 
 
 def fail(message: str) -> int:
