@@ -20,7 +20,10 @@ import math
 
 import cv2
 import numpy as np
+from llvmlite import ir as llvm_ir
 from numba import njit
+from numba import types as nb_types
+from numba.extending import intrinsic
 
 from sim.world import World
 
@@ -480,10 +483,44 @@ def _colours_close(img, v, u0, u1, levels):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _spread(c):
+def _spread_shifts(c):
     """Packed 0xBBGGRR uint32 -> int64 with each channel in its own LANE_BITS-bit lane."""
     c = np.int64(c)
     return (c & 0xFF) | ((c & 0xFF00) << (LANE_BITS - 8)) | ((c & 0xFF0000) << (2 * LANE_BITS - 16))
+
+
+@intrinsic
+def _pdep64(typingctx, value, mask):
+    """x86 BMI2 `pdep`: the low bits of `value` deposited, in order, at the set bits of `mask` (one instruction)."""
+    sig = nb_types.int64(nb_types.int64, nb_types.int64)
+
+    def codegen(context, builder, signature, args):
+        i64 = llvm_ir.IntType(64)
+        fn = builder.module.declare_intrinsic("llvm.x86.bmi.pdep.64", (), llvm_ir.FunctionType(i64, [i64, i64]))
+        return builder.call(fn, args)
+
+    return sig, codegen
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _spread_pdep(c):
+    """`_spread_shifts` in one instruction: the same bits (the three bytes land in the lanes' low bytes)."""
+    return _pdep64(np.int64(c), SPREAD_MASK)
+
+
+def _host_has_bmi2() -> bool:
+    """pdep is used only when numba compiles for this very CPU and the CPU has BMI2 (any x86 since 2013)."""
+    try:
+        from llvmlite import binding
+        from numba.core import config
+
+        return config.CPU_NAME is None and bool(binding.get_host_cpu_features().get("bmi2", False))
+    except Exception:  # noqa: BLE001 - no feature query (another platform): the portable path
+        return False
+
+
+SPREAD_MASK = 0xFF | (0xFF << LANE_BITS) | (0xFF << (2 * LANE_BITS))  # the lanes' low bytes, for pdep
+_spread = _spread_pdep if _host_has_bmi2() else _spread_shifts  # (profiled: ~2 % of a frame's CPU)
 
 
 @njit(cache=True, nogil=True, fastmath={"nsz", "arcp", "contract", "afn", "reassoc"})

@@ -335,3 +335,25 @@ def test_overhang_underside_is_smooth_and_nothing_else_changes(world_dir):
 
         # measured 3.2 / 5.3, 2.0 / 3.1, 2.2 / 3.2 (what is left are the overhang's silhouette and depth edges)
         assert streak(smooth) < 0.75 * streak(banded), (pose, streak(smooth), streak(banded))
+
+
+def test_colour_lane_spread_of_the_kernel_equals_the_shift_version():
+    """The kernel spreads packed 0xBBGGRR colours into their blend lanes with BMI2 pdep where the CPU has it:
+    every byte pattern must land exactly where the portable shifts put it (the frames are byte-identical)."""
+    from numba import njit
+
+    from sim import render as R
+
+    @njit
+    def both(values, out):
+        for i in range(values.shape[0]):
+            out[i, 0] = R._spread(values[i])
+            out[i, 1] = R._spread_shifts(values[i])
+
+    rng = np.random.default_rng(5)
+    values = np.concatenate([rng.integers(0, 1 << 24, 20000), [0, 0xFF, 0xFF00, 0xFF0000, 0xFFFFFF]]).astype(np.uint32)
+    out = np.zeros((values.size, 2), np.int64)
+    both(values, out)
+    assert np.array_equal(out[:, 0], out[:, 1])
+    lanes = (out[:, 1] >> np.array([[0], [R.LANE_BITS], [2 * R.LANE_BITS]])) & 0xFF
+    assert np.array_equal(lanes, [(values >> 0) & 0xFF, (values >> 8) & 0xFF, (values >> 16) & 0xFF])
