@@ -50,7 +50,8 @@ def render_stages(world, poses, samples):
                          float(world.rock_cell_m), R.COARSE_CELL_M, origin, R.FAR_M, R.FINE_STEP_MIN_M,
                          R.FINE_STEP_PER_M, R.REFINE_ITERS, r.zmax, r.sky_rgb, r.far_rgb, R.UNDERSIDE_SHADE,
                          R.UNDERSIDE_BAND_M, R.UNDERSIDE_RAMP_M, float(world.size_m), r._dark_lut, R.DARK_LUT_STEP_M,
-                         r.column_share_m, R.COLUMN_SHARE_RATIO, R.COLUMN_SHARE_LEVELS, r._col_order, r._col_offset,
+                         r.column_share_m, R.COLUMN_SHARE_RATIO, R.COLUMN_SHARE_LEVELS, r.share_rock, r._col_order,
+                         r._col_offset,
                          shared)
         out["raymarch kernel"].append(pc() - t0)
         t0 = pc()

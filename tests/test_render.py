@@ -277,6 +277,27 @@ def test_odd_columns_sharing_their_neighbours_hits_draw_nearly_the_marched_frame
         assert same_sky.mean() >= 0.999, pose
 
 
+def test_rock_hits_are_shared_between_columns_only_where_both_neighbours_are_rock(canyon_renderer):
+    """COLUMN_SHARE_ROCK: a column also averages its neighbours' rock hits (dark wall pixels); the pixels this adds
+    are all rock-dark, the navigable mask and the sky stay as with terrain-only sharing."""
+    w = canyon_renderer.world
+    terrain_only = Renderer(w)
+    terrain_only.share_rock = False
+    rng = np.random.default_rng(12)
+    rows, cols = np.nonzero(w.nav_truth)
+    added = 0
+    for i in rng.integers(0, rows.size, 6):
+        pose = (cols[i] + 0.5, rows[i] + 0.5, rng.uniform(0, 360), rng.normal(0, 2), rng.normal(0, 2))
+        img = canyon_renderer.render(pose)
+        ref = terrain_only.render(pose)
+        extra = canyon_renderer.last_shared.astype(bool) & ~terrain_only.last_shared.astype(bool)
+        added += extra.sum()
+        assert img[extra].max(initial=0) < 100, pose  # rock-dark (the floor is far brighter)
+        assert (_navigable(img) == _navigable(ref)).mean() >= 0.999, pose
+        assert (np.isfinite(canyon_renderer.last_depth) == np.isfinite(terrain_only.last_depth)).mean() >= 0.999
+    assert added > 1000  # it does share rock (~1,300 pixels per real-world frame)
+
+
 @pytest.mark.parametrize("tiers", [1, 2])
 def test_column_plan_draws_every_column_once_after_the_neighbours_it_averages(tiers):
     from sim.render import column_plan
@@ -316,6 +337,7 @@ def test_overhang_underside_is_smooth_and_nothing_else_changes(world_dir):
     r = Renderer(load_world("real"))
     start = (*r.world.start_xy, r.world.start_yaw_training, 0.0, 0.0)
     elsewhere = [start, (78.9, 75.6, 227.0, -0.3, 0.1)]  # wall rocks whose bottoms are off the slope are seen too
+    r.share_rock = False  # sharing rock hits between columns tests their colours: that would couple other pixels in
     for pose in OVERHANG_VIEWS + elsewhere:
         r.smooth_underside = True
         smooth = r.render(pose)
