@@ -8,7 +8,8 @@ guessed.  Per class it also gives the light-sand share of the votes landing on t
 navigable cells and on the correctly mapped edge cells: a class worth gating is one whose
 votes call the false cells floor much more often than the true edge cells.  Last, the
 near-confirmation check (a cell whose views from within 5 m see mostly no sand is not floor,
-whatever the far views say) against the curve the scored light share alone draws.
+whatever the far views say) against the curve the scored light share alone draws, and the wrong
+cells by the rule that decided them and by how much cast shadow their votes saw.
 
 Written for issue 27 (why twin missions mapped at ~95 % fidelity); findings in docs/perception.md.
 Outputs in --out: ``errors.png`` (north up; grey mapped floor, red false navigable, blue missed
@@ -43,6 +44,8 @@ NEAR_CONFIRM_RANGE_M = 5.0  # votes from ground nearer than this to the rover ar
 NEAR_CONFIRM_MIN_VOTES = 2.0  # weighted near votes a cell needs before the check applies to it
 NEAR_CHECKS = ((0.15, 0.5), (0.2, 0.4), (0.2, 0.5), (0.25, 0.5))  # (scored light share, near sand share) reported
 CURVE_SHARES = tuple(np.round(np.arange(0.05, 0.451, 0.025), 3))  # scored light shares of the reference curve
+# Wrong cells by the rule that decided them and by how much cast shadow their votes saw (issue 27, round 6)
+SHADE_SEEN_SHARES = (0.05, 0.2)  # a wrong cell counts as in shadow when shadowed-sand votes make more than this share
 
 
 @dataclass
@@ -181,6 +184,35 @@ def near_confirmation(votes: VoteLog, truth: np.ndarray) -> Dict:
     return {"share_curve": curve, "checks": checks}
 
 
+def wrong_cells_by_rule(mem, truth: np.ndarray) -> Dict:
+    """Why each wrong cell of the scored map is wrong, by perception's own rules.
+
+    False navigable cells by the rule that marks them (``light``: the light-sand share, ``shade``: only the
+    light-plus-shadowed-sand majority, ``fill``: only the notch fill); missed floor cells by whether any
+    vote saw them.  For both, how many have more than each SHADE_SEEN_SHARES share of shadowed-sand votes:
+    wrong cells in cast shadow are a shadow problem, the others a lighting/edge one.
+    """
+    n = perception.WORLD_SIZE
+    floor = truth > 0
+    seen, majority = perception._majority_navigable(mem, 0, n, 0, n, scored=True)
+    share, spoken = perception.band_light_share(mem)
+    total = mem.nav_votes + mem.obs_votes
+    light = seen & np.where(spoken, share > perception.SCORED_BAND_SHARE,
+                            mem.nav_votes > perception.SCORED_NAV_MAJORITY * total)
+    marked = perception.render_worldmap(mem)[:, :, 2] > 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shaded = np.where(total > 0, (mem.shade_votes + mem.dim_shade_votes) / total, 0.0)
+
+    def in_shadow(sel):
+        return {f"shadow_share_over_{t:g}": int(np.count_nonzero(sel & (shaded > t))) for t in SHADE_SEEN_SHARES}
+
+    false, missed = marked & ~floor, floor & ~marked
+    return {"false": {"cells": int(false.sum()), "light": int(np.count_nonzero(false & light)),
+                      "shade": int(np.count_nonzero(false & majority & ~light)),
+                      "fill": int(np.count_nonzero(false & ~majority)), **in_shadow(false)},
+            "missed": {"cells": int(missed.sum()), "seen": int(np.count_nonzero(missed & seen)), **in_shadow(missed & seen)}}
+
+
 def _bands(values, edges, unit):
     codes = np.clip(np.digitize(values, edges) - 1, 0, len(edges) - 2)
     names = [f"{a:g}-{b:g} {unit}" if np.isfinite(b) else f">= {a:g} {unit}" for a, b in zip(edges, edges[1:])]
@@ -240,6 +272,7 @@ def attribute(votes: VoteLog, truth: np.ndarray, modes: Optional[np.ndarray] = N
                          "without_mapped_pct": round(s.mapped_pct, 2), "without_fidelity_pct": round(s.fidelity_pct, 2)})
         out["factors"][factor] = rows
     out["near_confirmation"] = near_confirmation(votes, truth)
+    out["wrong_cells"] = wrong_cells_by_rule(_memory(votes)[0], truth)
     return out
 
 
@@ -298,6 +331,12 @@ def main(argv=None) -> int:
     for c in nc["checks"]:
         print(f"  {c['share']:.3g}, {c['near_sand_share']:.3g} -> {c['mapped_pct']:.2f} / {c['fidelity_pct']:.2f}, "
               f"{c['gain_at_equal_mapped']:+.2f}")
+    w = report["wrong_cells"]
+    f, m = w["false"], w["missed"]
+    lo, hi = (f"shadow_share_over_{t:g}" for t in SHADE_SEEN_SHARES)
+    print(f"false cells {f['cells']}: light share {f['light']}, shadowed-sand majority {f['shade']}, notch fill {f['fill']}; "
+          f"in shadow (shadowed-sand votes > {SHADE_SEEN_SHARES[0]:g} / > {SHADE_SEEN_SHARES[1]:g}) {f[lo]} / {f[hi]}")
+    print(f"missed floor cells {m['cells']}: seen {m['seen']}, of them in shadow {m[lo]} / {m[hi]}")
     print(f"errors.png and vote_sources.json in {out}")
     return 0
 

@@ -33,3 +33,26 @@ def test_near_confirmation_only_turns_down_cells_near_views_saw_without_sand(tes
     assert (near_sand <= near + 1e-3).all() and near.sum() < votes.votes[:, :2].sum()
     report = near_confirmation(votes, ground_truth)
     assert len(report["share_curve"]) > 10 and all("gain_at_equal_mapped" in c for c in report["checks"])
+
+
+def test_wrong_cells_are_split_by_the_rule_that_marked_them_and_by_shadow():
+    import perception as P
+    from replay.vote_sources import wrong_cells_by_rule
+
+    truth = np.zeros((200, 200), np.uint8)
+    truth[50:60, 50:60] = 255  # a floor square
+    mem = P.PerceptionMemory()
+    mem.nav_votes[50:60, 50:60] = 90  # the square: sunlit floor ...
+    mem.obs_votes[50:60, 50:60] = 10
+    mem.obs_votes[50:60, 59] = 90  # ... but its east column is dark, half of it in shadow: missed
+    mem.nav_votes[50:60, 59] = 0
+    mem.shade_votes[50:55, 59] = 40
+    mem.nav_votes[60, 50:60] = 80  # a sunlit fringe row north of it: false by the light share
+    mem.obs_votes[60, 50:60] = 20
+    mem.shade_votes[40, 40] = mem.obs_votes[40, 40] = 10  # a cell of shadowed sand only: false by the majority
+    w = wrong_cells_by_rule(mem, truth)
+    assert w["false"] == {"cells": 11, "light": 10, "shade": 1, "fill": 0, "shadow_share_over_0.05": 1,
+                          "shadow_share_over_0.2": 1}
+    assert w["missed"] == {"cells": 10, "seen": 10, "shadow_share_over_0.05": 5, "shadow_share_over_0.2": 5}
+    score = score_map(P.render_worldmap(mem), truth)
+    assert w["false"]["cells"] == score.marked_cells - score.good_cells
