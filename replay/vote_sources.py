@@ -42,8 +42,10 @@ PATH_EVERY = 10  # errors.png draws every Nth rover position
 # outwards; the check turns down a cell whose near views see mostly no sand, whatever the far ones say.
 NEAR_CONFIRM_RANGE_M = 5.0  # votes from ground nearer than this to the rover are near views, m
 NEAR_CONFIRM_MIN_VOTES = 2.0  # weighted near votes a cell needs before the check applies to it
-NEAR_CHECKS = ((0.15, 0.5), (0.2, 0.4), (0.2, 0.5), (0.25, 0.5))  # (scored light share, near sand share) reported
-CURVE_SHARES = tuple(np.round(np.arange(0.05, 0.451, 0.025), 3))  # scored light shares of the reference curve
+# The curve and the checks vary the scored map's deciding share: since round 5 that is the band-mean share
+# (SCORED_BAND_SHARE, 0.35); varying the plain share (which only decides cells no band speaks for) drew a flat line.
+NEAR_CHECKS = ((0.25, 0.5), (0.3, 0.4), (0.3, 0.5), (0.35, 0.5))  # (scored band share, near sand share) reported
+CURVE_SHARES = tuple(np.round(np.arange(0.15, 0.551, 0.025), 3))  # scored band shares of the reference curve
 # Wrong cells by the rule that decided them and by how much cast shadow their votes saw (issue 27, round 6)
 SHADE_SEEN_SHARES = (0.05, 0.2)  # a wrong cell counts as in shadow when shadowed-sand votes make more than this share
 
@@ -137,15 +139,15 @@ def _memory(votes: VoteLog, keep: Optional[np.ndarray] = None):
 
 
 def _render(mem, share: Optional[float] = None) -> np.ndarray:
-    """perception.render_worldmap, with the scored light share set to ``share`` for this call only."""
+    """perception.render_worldmap, with the scored band share (SCORED_BAND_SHARE) set to ``share`` for this call only."""
     if share is None:
         return perception.render_worldmap(mem)
-    saved = perception.SCORED_NAV_MAJORITY
-    perception.SCORED_NAV_MAJORITY = share
+    saved = perception.SCORED_BAND_SHARE
+    perception.SCORED_BAND_SHARE = share
     try:
         return perception.render_worldmap(mem)
     finally:
-        perception.SCORED_NAV_MAJORITY = saved
+        perception.SCORED_BAND_SHARE = saved
 
 
 def near_veto(worldmap: np.ndarray, near: np.ndarray, near_sand: np.ndarray, min_sand_share: float) -> np.ndarray:
@@ -324,7 +326,7 @@ def main(argv=None) -> int:
             print(f"{factor:14} {row['band']:16} {row['votes_pct']:8.1f} {str(row['light_share_false']):>12} "
                   f"{str(row['light_share_edge']):>11} {row['without_mapped_pct']:>21.2f} / {row['without_fidelity_pct']:.2f}")
     nc = report["near_confirmation"]
-    print("share curve (scored light share: mapped / fidelity %): "
+    print("share curve (scored band share: mapped / fidelity %): "
           + ", ".join(f"{s:g}: {m:.2f} / {f:.2f}" for s, m, f in nc["share_curve"]))
     print(f"near confirmation (within {NEAR_CONFIRM_RANGE_M:g} m): share, near sand share -> mapped / fidelity %, "
           "fidelity gain over the share curve at equal mapped")
