@@ -99,6 +99,7 @@ TRACK_WHITE_RGB = (218.0, 194.0, 178.0)  # what a white surface on the lit floor
 # (fitted on royalejandro frames 1522, 2240, 3758, 5926: core track pixels / the Tracks.mat tint)
 TRACK_DRAW_MAX_M = 30.0  # quads farther than this (under half a pixel) are not drawn, m
 TRACK_DEPTH_TOLERANCE_M = 0.03  # a quad shows where it is no farther than this behind the surface hit, m
+TRACK_ANISO_MAX = 1.0  # tread mip level from the footprint's long axis over this (1: isotropic, as the real frames show; huge: short axis), ratio
 SAMPLE_GROUND_CACHE = 256  # sample spots whose ground height a renderer remembers, count
 SAMPLE_RGB_255 = np.array(SAMPLE_RGB) * 255.0  # the same gold in 0..255 (read by the numba drawer)
 
@@ -1057,7 +1058,7 @@ class Renderer:
         _draw_tracks_kernel(img, depth, np.ascontiguousarray(rot), origin, self.ray_a, self.ray_b, quads,
                             self._tread, QUAD_HALF_M, self._track_rgb, self.baked["light"],
                             float(self.world.rock_cell_m), self._dark_lut, DARK_LUT_STEP_M, TRACK_DRAW_MAX_M,
-                            TRACK_DEPTH_TOLERANCE_M, FOCAL_PX, CX, CY)
+                            TRACK_DEPTH_TOLERANCE_M, FOCAL_PX, CX, CY, TRACK_ANISO_MAX)
 
     def draw_samples(self, img, depth, origin, rot, samples):
         """Draw gold sample rocks (shaded ellipsoids standing on the ground) into a frame in place,
@@ -1164,7 +1165,7 @@ def _draw_samples_kernel(img, depth, rot, origin, ray_a, ray_b, params, sun, min
 
 @njit(cache=True, nogil=True)
 def _draw_tracks_kernel(img, depth, rot, origin, ray_a, ray_b, quads, tread, half, rgb, light, cell,
-                        dark_lut, dark_lut_step, max_dist, tolerance, focal, cx, cy):
+                        dark_lut, dark_lut_step, max_dist, tolerance, focal, cx, cy, aniso):
     """Per quad: project its corners, and in that screen box intersect each pixel's ray with the quad's
     plane; an opaque tread texel in front of the surface the pixel shows (within `tolerance`) is drawn."""
     h_img, w_img = depth.shape
@@ -1223,9 +1224,12 @@ def _draw_tracks_kernel(img, depth, rot, origin, ray_a, ray_b, quads, tread, hal
                 across = ex * rx + ey * ry
                 if abs(along) >= half or abs(across) >= half:
                     continue
-                dist = t * math.sqrt(dx * dx + dy * dy + dz * dz)
-                # mip level from the texels one pixel spans across the view (anisotropic filtering)
-                texels = dist / focal * n_tex / (2.0 * half)
+                norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+                dist = t * norm
+                # mip level from the texels one pixel spans: across the view, or along the ray (the footprint's
+                # long axis, 1 / sine of the grazing angle longer) over the anisotropy the texture is filtered with
+                across_px = dist / focal
+                texels = max(across_px, across_px * norm / (-dz) / aniso) * n_tex / (2.0 * half)
                 level = 0
                 while texels >= 2.0 and level < n_levels - 1:
                     texels *= 0.5
