@@ -42,6 +42,14 @@ recorded at a quality level with cast shadows and keeps the `--shadows on` look.
    CAST_SHADOW_FACTOR over a ramp on the blurred raster, and draws the far floor with the same
    mipmaps and back-scatter as without (items 1 and 2); fitted on dimaga, checked on royalejandro
    and test_dataset.
+5. Far falloff (round 4, `far_falloff`): on pure sunlit sand the real floor at 10-16 m is 8-16 % darker
+   than the twin draws it with the mipmaps alone (real / twin darkest channel 0.92 / 0.86 megalphian,
+   0.91 / 0.88 royalejandro, 0.94 / 0.84 dimaga at 10-12 / 12-16 m; 0.96-0.99 from 2 to 10 m), so
+   everything beyond 8 m darkens by up to FAR_FALLOFF. Fitted on megalphian and dimaga, checked on
+   royalejandro (held out). test_dataset's far floor is the other way round (real brighter, 1.03-1.23
+   beyond 10 m): its quality level filters more sharply (round 3), and its whole view loses by this.
+   Round 4 also set SHADOWLESS_SHADOW_FACTOR to megalphian's measured shadowed / sunlit ratio (0.97,
+   `sim.realism.detect_shadows`) instead of the 0.9 that served the shadowless and shadowed drives at once.
 """
 from __future__ import annotations
 
@@ -53,7 +61,10 @@ from numba import njit
 
 SHADOWLESS_KNEE_M = 5.2  # the near floor's mild darkening stops growing here, m
 SHADOWLESS_NEAR_SHARE = 0.5  # share of the other quality levels' near-floor darkening kept, 0..1
-SHADOWLESS_SHADOW_FACTOR = 0.9  # brightness of the floor hidden from the sun without cast shadows, 0..1
+SHADOWLESS_SHADOW_FACTOR = 0.97  # brightness of the floor hidden from the sun without cast shadows (megalphian's measured ratio), 0..1
+FAR_FALLOFF = 0.08  # extra darkening of everything far away (real far floor 8-16 m darker than the mipmaps alone), fraction
+FAR_FALLOFF_START_M = 8.0  # ... which starts at this viewing distance, m
+FAR_FALLOFF_SCALE_M = 4.0  # ... and grows to its full size over this e-folding distance, m
 ROCK_LAYER_RGB = (78.0, 53.0, 45.0)  # mean colour of the terrain's six rock layers on lit level ground, 0..255
 SPLAT_LOD_MAX = 5.0  # coarsest mip level the far floor is drawn with (5: 12.5 m texels), levels
 SPLAT_LOD_BIAS = 0.0  # added to each pixel's mip level (0: the footprint's long axis, isotropic filtering), levels
@@ -68,13 +79,21 @@ CAST_SHADOW_COVER = (0.1, 0.3)  # blurred shadow raster values over which the ca
 
 
 def shadowless_darkening(dist_m) -> np.ndarray:
-    """Brightness factor by viewing distance at the simulator's shadowless quality levels: a share of
-    the other quality levels' near-floor darkening (the colour table was fitted with that curve),
-    held from the knee on; the far floor's darkening comes from the splat mipmaps (`apply_splat_mip`)."""
+    """Brightness factor by viewing distance (both quality levels since round 3): a share of the first
+    look's near-floor darkening (the colour table was fitted with that curve), held from the knee on,
+    times the far falloff (item 5); the far floor's varying darkening comes from the splat mipmaps."""
     from sim.render import DIST_DARKEN, DIST_SCALE_M
 
     dist = np.asarray(dist_m, np.float64)
-    return 1.0 - SHADOWLESS_NEAR_SHARE * DIST_DARKEN * (1.0 - np.exp(-np.minimum(dist, SHADOWLESS_KNEE_M) / DIST_SCALE_M))
+    near = 1.0 - SHADOWLESS_NEAR_SHARE * DIST_DARKEN * (1.0 - np.exp(-np.minimum(dist, SHADOWLESS_KNEE_M) / DIST_SCALE_M))
+    return near * far_falloff(dist)
+
+
+def far_falloff(dist_m) -> np.ndarray:
+    """Brightness factor beyond FAR_FALLOFF_START_M (1 nearer): the real far floor is darker than the
+    splat mipmaps alone draw it, on every drive except test_dataset's quality level (item 5)."""
+    beyond = np.maximum(np.asarray(dist_m, np.float64) - FAR_FALLOFF_START_M, 0.0)
+    return 1.0 - FAR_FALLOFF * (1.0 - np.exp(-beyond / FAR_FALLOFF_SCALE_M))
 
 
 def cast_shadow_cover(shadow: np.ndarray) -> np.ndarray:

@@ -8,11 +8,12 @@ from sim.world import with_shadows
 from test_render import _flat_world
 
 
-def test_near_floor_darkening_stops_at_the_knee():
-    d = np.array([0.0, 2.0, shading.SHADOWLESS_KNEE_M, 10.0, 60.0])
+def test_near_floor_darkening_stops_at_the_knee_and_the_far_falloff_starts_later():
+    d = np.array([0.0, 2.0, shading.SHADOWLESS_KNEE_M, shading.FAR_FALLOFF_START_M, 10.0, 200.0])
     f = shading.shadowless_darkening(d)
     assert f[0] == 1.0 and np.all(np.diff(f) <= 0)
-    assert f[2] > 0.93 and f[3] == f[2] == f[4]  # the near floor loses a few per cent (measured 0.95), then holds
+    assert f[2] > 0.93 and f[3] == f[2]  # the near floor loses a few per cent (measured 0.95), then holds
+    assert f[4] < f[3] and f[5] == pytest.approx(f[2] * (1.0 - shading.FAR_FALLOFF))  # then the far falloff
     lut = _darkening_lut(False)
     assert lut[-1] == pytest.approx(f[-1]) and lut[-1] > _darkening_lut(True)[-1]  # the far darkening is the mipmaps'
 
