@@ -43,7 +43,8 @@ ROVER_PX = (160.0, 160.0)  # rover origin in the standard warped image (x, y), p
 # floors tests/test_realism.py holds on test_dataset with shadows on (the fitted-on drive)
 FLOOR_NEAR_MEAN = 0.93  # mean IoU within 5 m
 FLOOR_NEAR_P10 = 0.85  # 10th percentile IoU within 5 m
-FLOOR_WHOLE_MEAN = 0.82  # mean IoU over the whole warped view
+FLOOR_WHOLE_MEAN = 0.80  # mean IoU over the whole warped view (issue 28's floor; 0.82 before round 4's far falloff,
+# which fits megalphian, dimaga and royalejandro and costs test_dataset's sharper-filtering quality level: 0.807 here)
 # issue 28's floors for every drive, moving frames, default shadows (the CLI's exit status)
 FLOOR_MOVING_NEAR_MEAN = 0.90  # mean IoU within 5 m over moving frames
 FLOOR_MOVING_WHOLE_MEAN = 0.80  # mean IoU over the whole view, moving frames
