@@ -511,16 +511,23 @@ def _spread_pdep(c):
 
 
 def _host_has_bmi2() -> bool:
-    """pdep is used only when numba compiles for this very CPU and the CPU has BMI2 (any x86 since 2013)."""
+    """pdep is used only when numba compiles for this very CPU and the CPU has a fast BMI2 pdep.
+
+    Intel since 2013 and AMD since Zen 3 do it in one cycle; AMD Excavator, Zen 1 and Zen 2 run it
+    as microcode (hundreds of cycles), where the shift version is far faster.
+    """
     try:
         from llvmlite import binding
         from numba.core import config
 
-        return config.CPU_NAME is None and bool(binding.get_host_cpu_features().get("bmi2", False))
+        slow_pdep = binding.get_host_cpu_name().startswith(SLOW_PDEP_CPUS)
+        return (config.CPU_NAME is None and not slow_pdep
+                and bool(binding.get_host_cpu_features().get("bmi2", False)))
     except Exception:  # noqa: BLE001 - no feature query (another platform): the portable path
         return False
 
 
+SLOW_PDEP_CPUS = ("bdver", "znver1", "znver2")  # LLVM host CPU names whose pdep is microcoded
 SPREAD_MASK = 0xFF | (0xFF << LANE_BITS) | (0xFF << (2 * LANE_BITS))  # the lanes' low bytes, for pdep
 _spread = _spread_pdep if _host_has_bmi2() else _spread_shifts  # (profiled: ~2 % of a frame's CPU)
 
