@@ -57,6 +57,7 @@ TURN_IN_PLACE_SPEED_MPS = 0.3  # the simulator turns in place only below 0.316 m
 ROTATE_ENTER_DEG = 90.0  # a wanted heading further off than this is reached by turning in place, degrees
 LEAVE_PICKUP_ROTATE_DEG = 30.0  # leaving a pickup spot (samples lie at wall feet), turn in place first when the way on is further off than this, degrees
 SWEEP_REASONS = ("path-behind", "leave-pickup")  # long turns in place that may go the long way round to sweep the camera over unsearched wall feet (explore.sweep_direction)
+GLANCE_DONE_M = 3.0  # a turn back glances at unsearched wall feet once per place: not again this close, m
 SWEEP_COMMIT_DEG = 90.0  # ...the long way is kept while the heading error, on the far side, is larger than this, degrees
 ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
 SPIN_WINDOW_S = 20.0  # window for detecting endless turning in place, s
@@ -178,6 +179,8 @@ class NavMemory:
         self.spin_events = []  # (t, x, y) of every spin detection, for alternating the escape
         self.turn_ref = None  # (t, yaw) since when turning in place has not changed the heading
         self.rotate_dir = None  # +1 / -1: this turn goes the long way round (sweeping unsearched wall feet); None: the short way
+        self.rotate_via = None  # world yaw to turn to once rotate_heading (a glance at unsearched wall feet) is reached, or None
+        self.glanced = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places a turn in place already glanced at unsearched wall feet
         self.unsearched = None  # unsearched wall feet (explore.unsearched_wall_feet) at the last plan with samples missing, or None
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
         # planning
@@ -424,7 +427,7 @@ def _select_and_run(rover, nav, s):
         _reset_goal_progress(nav, s)  # time spent on a rock or a recovery is no stall of the frontier goal
     if s.picking_up or s.near_sample:
         nav.recovery = None
-        nav.rotate_heading = None
+        nav.rotate_heading = nav.rotate_via = None
         return "pickup", mode_pickup(nav, s)
     if nav.recovery is not None or _check_stuck(nav, s) or _check_turn_blocked(nav, s):
         cmd = mode_stuck(nav, s)
@@ -465,7 +468,7 @@ def _check_spinning(nav, s, mode):
     log.info("turning in place without progress at (%.1f, %.1f) t=%.1f: dropping goal %s, %s",
              s.pos[0], s.pos[1], s.t, nav.path_goal, "driving ahead" if ahead else "backing off")
     _abandon_goal(nav, s)
-    nav.rotate_heading = None
+    nav.rotate_heading = nav.rotate_via = None
     nav.recovery = stuck.Recovery(s.t, _escape_side(nav, s), 1, ahead=ahead)
     nav.spin_hist.clear()
 
@@ -565,7 +568,7 @@ def _begin_recovery(nav, s, why, noticed_after_s):
         sign = -sign
     nav.recovery = stuck.Recovery(s.t, sign, repeat)
     nav.progress.reset()
-    nav.rotate_heading = None
+    nav.rotate_heading = nav.rotate_via = None
     nav.plan_time = -math.inf  # replan around the blocked cells
     nav.stage_for = None  # a rock approach that wedged is decided again, around the stuck cells
     log.info("%s at (%.1f, %.1f) t=%.1f, repeat %d, escaping %s", why, s.pos[0], s.pos[1], s.t, repeat,
@@ -626,6 +629,9 @@ def mode_stop(nav, s):
             return Command(0.0, BRAKE_STOP, 0.0)
         return Command(0.0, 0.0, nav.rotate_dir * STEER_LIMIT_DEG)  # the long way round, until past the far side
     if abs(err) <= ROTATE_EXIT_DEG or s.t - nav.rotate_since > ROTATE_TIMEOUT_S:
+        if nav.rotate_via is not None:  # glanced at the unsearched wall feet: now on to the wanted heading
+            nav.rotate_heading, nav.rotate_via, nav.rotate_since, nav.rotate_dir = nav.rotate_via, None, s.t, None
+            return mode_stop(nav, s)
         nav.rotate_heading = None
         return None
     if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
@@ -860,13 +866,35 @@ def _start_rotation(nav, s, heading_deg, reason):
     nav.rotate_heading = float(heading_deg) % 360.0
     nav.rotate_since = s.t
     nav.rotate_dir = None
+    nav.rotate_via = None
     if reason in SWEEP_REASONS and _samples_missing(s) and nav.unsearched is not None:
         way = explore.sweep_direction(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
         if way * predict.wrap_deg(nav.rotate_heading - s.yaw) < 0:
             nav.rotate_dir = way
             log.info("turning the long way round (%+d) at (%.1f, %.1f) t=%.1f: unsearched wall feet on that side",
                      way, s.pos[0], s.pos[1], s.t)
+        else:
+            _glance_first(nav, s)
     log.debug("turn in place to %.0f deg (%s) at t=%.1f", nav.rotate_heading, reason, s.t)
+
+
+def _glance_first(nav, s):
+    """Before a turn back (the short way), turn first to face unsearched wall feet close by that the turn
+    would not sweep (explore.glance_heading), once per place (GLANCE_DONE_M).
+
+    A turn back is where a path doubles back: an arm's tip, a pocket's end, a nook beside a dead end.
+    On seed 15 the rover turned back 3.4 m from the east-nook sample with the nook 65 deg to its left
+    and turned right, away from it; the turn that would have swept it was 243 deg the long way."""
+    cell = grid.world_to_cell(s.pos)
+    if cell is None or nav.glanced[cell]:
+        return
+    glance = explore.glance_heading(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
+    if glance is None:
+        return
+    explore.ignore_disc(nav.glanced, cell, GLANCE_DONE_M)
+    nav.rotate_via, nav.rotate_heading = nav.rotate_heading, glance
+    log.info("glancing at %.0f deg before turning back at (%.1f, %.1f) t=%.1f: unsearched wall feet there",
+             glance, s.pos[0], s.pos[1], s.t)
 
 
 def _drive_heading(nav, s, alpha, max_speed, planned=False):

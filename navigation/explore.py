@@ -48,6 +48,7 @@ SWEEP_RADIUS_M = 8.0  # a long turn in place counts unsearched wall feet this cl
 SWEEP_HALF_FOV_DEG = 40.0  # ...within this half-angle of the heading (perception's look cone), degrees
 SWEEP_MAX_TURN_DEG = 225.0  # the long way round is taken only up to this (ROTATE_TIMEOUT_S at ~45 deg/s is 270), degrees
 SWEEP_MIN_CELLS = 3  # ...and only when it sweeps at least this many unsearched wall-foot cells the short way does not, cells
+GLANCE_MIN_CELLS = 3  # a turn back glances first at unsearched wall feet within SEARCH_FACE_RADIUS_M only when the best heading outside its sweep holds this many (a sample nook is wider), cells
 SIGHT_WALL_DEPTH_M = 0.7  # a line of sight sees mapped wall this deep past where it first meets wall, no deeper (map edges are a cell fuzzy; a rock in front hides the nook behind it: seeds 7, 15), m
 SIGHT_STEP_M = 0.2  # line-of-sight march step, m
 SIGHT_RAY_DEG = 2.0  # angle between lines of sight (0.14 m apart at 4 m, well under a cell), degrees
@@ -424,6 +425,40 @@ def face_heading(unsearched, pos, yaw_deg):
     if counts[best] < SEARCH_FACE_MIN_CELLS:
         return None
     if abs((headings[best] - yaw_deg + 180.0) % 360.0 - 180.0) <= SEARCH_FACE_HALF_FOV_DEG:
+        return None
+    return float(headings[best])
+
+
+def glance_heading(unsearched, pos, yaw_deg, target_deg):
+    """World heading (deg) to face first, before a turn in place the short way from yaw_deg to target_deg:
+    the one putting the most unsearched cells within SEARCH_FACE_RADIUS_M inside SEARCH_FACE_HALF_FOV_DEG
+    among headings the short turn does not sweep (nor start or end on), or None when it holds fewer than
+    GLANCE_MIN_CELLS.
+
+    A turn back happens where a path doubles back (an arm's tip, a pocket's end), which is where nooks
+    are; the camera then faces the ones beside the dead end whichever side the rover came from.
+    """
+    if unsearched is None or not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)
+                                  and np.isfinite(target_deg)):
+        return None
+    dx, dy = _unsearched_offsets_within(unsearched, pos, SEARCH_FACE_RADIUS_M)
+    if len(dx) < GLANCE_MIN_CELLS:
+        return None
+    err = (float(target_deg) - float(yaw_deg) + 180.0) % 360.0 - 180.0
+    h = SEARCH_FACE_HALF_FOV_DEG
+    # candidate offsets from yaw, measured the short turn's way: [-h, |err| + h] is swept anyway
+    way = 1.0 if err >= 0 else -1.0
+    offs = np.arange(0.0, 360.0, SEARCH_FACE_STEP_DEG)
+    swept = (offs <= abs(err) + h) | (offs >= 360.0 - h)
+    cand = offs[~swept]
+    if cand.size == 0:
+        return None
+    headings = (float(yaw_deg) + way * cand) % 360.0
+    bearing = np.degrees(np.arctan2(dy, dx))
+    off = np.abs((bearing[None, :] - headings[:, None] + 180.0) % 360.0 - 180.0)
+    counts = (off <= h).sum(axis=1)
+    best = int(np.argmax(counts))
+    if counts[best] < GLANCE_MIN_CELLS:
         return None
     return float(headings[best])
 

@@ -448,6 +448,37 @@ def test_turning_round_with_a_sample_missing_sweeps_the_camera_over_unsearched_w
     assert t - 10.0 < decision.ROTATE_TIMEOUT_S
 
 
+def test_a_turn_back_faces_unsearched_wall_feet_first_then_ends_at_the_wanted_heading():
+    """Seed 15: the rover turned back 304 -> 187 deg the short way 3.4 m from the east nook (at ~10 deg)
+    and never faced it; now it glances at the nook first, once per place."""
+    pos = (145.5, 109.1)
+    nav = decision.NavMemory()
+    nav.unsearched = np.zeros((200, 200), bool)
+    nav.unsearched[109:112, 148:150] = True  # around (149, 110.5)
+    empty = np.zeros(0)
+    yaw, t, faced = 304.0, 10.0, False
+    s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+    decision._start_rotation(nav, s, 187.0, "path-behind")
+    while nav.rotate_heading is not None and t < 10.0 + 2 * decision.ROTATE_TIMEOUT_S + 1.0:
+        s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+        cmd = decision.mode_stop(nav, s)
+        if cmd is None:
+            break
+        yaw = (yaw + 3.0 * DT * cmd.steer) % 360.0  # 45 deg/s at full lock
+        faced |= abs((yaw - 20.0 + 180.0) % 360.0 - 180.0) < 15.0
+        t += DT
+    assert faced, "the camera faced the nook"
+    assert abs((yaw - 187.0 + 180.0) % 360.0 - 180.0) <= decision.ROTATE_EXIT_DEG + 3.0
+    s = decision.Inputs(t, pos, yaw + 117.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+    decision._start_rotation(nav, s, 187.0, "path-behind")
+    assert nav.rotate_via is None, "glanced here already: the next turn back goes straight"
+    fresh = decision.NavMemory()
+    fresh.unsearched = nav.unsearched
+    s = decision.Inputs(t, pos, 304.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 0)
+    decision._start_rotation(fresh, s, 187.0, "path-behind")
+    assert fresh.rotate_via is None and fresh.rotate_heading == 187.0, "all samples in: no glance"
+
+
 def test_a_rock_approach_decided_again_after_a_stuck_gets_its_own_close_timeout():
     """Seed 37 wedged twice at the east nook; the 30 s close timer ran out on the way to the third
     staging point (the one that works) and the rock was given up for 60 s."""

@@ -467,6 +467,20 @@ def test_a_long_turn_goes_the_way_that_sweeps_unsearched_wall_feet():
     assert explore.sweep_direction(_feet_at(300.0, 6.5), pos, 100.0, 16.0) == -1  # long way 276 deg: too long
 
 
+def test_a_turn_back_glances_first_at_unsearched_wall_feet_it_would_not_sweep():
+    """Seed 15: turning back 304 -> 187 deg (the short way, right) 3.4 m from the east nook, which lay at
+    about 10 deg on the other side; the glance faces it first."""
+    pos = (16.7, 98.3)
+    glance = explore.glance_heading(_feet_at(10.0, 3.5), pos, 304.0, 187.0)
+    assert glance is not None and abs((glance - 10.0 + 180.0) % 360.0 - 180.0) <= explore.SEARCH_FACE_HALF_FOV_DEG
+    assert explore.glance_heading(_feet_at(250.0, 3.5), pos, 304.0, 187.0) is None  # the short turn sweeps them
+    assert explore.glance_heading(_feet_at(10.0, 7.0), pos, 304.0, 187.0) is None  # beyond SEARCH_FACE_RADIUS_M
+    assert explore.glance_heading(np.zeros((200, 200), bool), pos, 304.0, 187.0) is None
+    one = np.zeros((200, 200), bool)
+    one[98, 20] = True  # a single cell (a map speck) is no nook
+    assert explore.glance_heading(one, pos, 304.0, 187.0) is None
+
+
 def test_the_search_keeps_going_the_way_it_faces_unless_going_back_is_much_nearer():
     """Seed 29 walked east, turned back 25 m for wall feet it had passed, then crossed the canyon east again."""
     free = np.zeros((200, 200), bool)
