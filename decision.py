@@ -57,6 +57,7 @@ TURN_IN_PLACE_SPEED_MPS = 0.3  # the simulator turns in place only below 0.316 m
 ROTATE_ENTER_DEG = 90.0  # a wanted heading further off than this is reached by turning in place, degrees
 LEAVE_PICKUP_ROTATE_DEG = 30.0  # leaving a pickup spot (samples lie at wall feet), turn in place first when the way on is further off than this, degrees
 SWEEP_REASONS = ("path-behind", "leave-pickup")  # long turns in place that may go the long way round to sweep the camera over unsearched wall feet (explore.sweep_direction)
+GLANCE_REASONS = ("path-behind",)  # turns in place that may glance first at unsearched wall feet (explore.glance_heading): a path doubling back, not leaving a pickup (samples lie >= 5 m apart; glancing there too cost seeds 0, 3, 7 time)
 GLANCE_DONE_M = 3.0  # a turn back glances at unsearched wall feet once per place: not again this close, m
 SWEEP_COMMIT_DEG = 90.0  # ...the long way is kept while the heading error, on the far side, is larger than this, degrees
 ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
@@ -873,7 +874,7 @@ def _start_rotation(nav, s, heading_deg, reason):
             nav.rotate_dir = way
             log.info("turning the long way round (%+d) at (%.1f, %.1f) t=%.1f: unsearched wall feet on that side",
                      way, s.pos[0], s.pos[1], s.t)
-        else:
+        elif reason in GLANCE_REASONS:
             _glance_first(nav, s)
     log.debug("turn in place to %.0f deg (%s) at t=%.1f", nav.rotate_heading, reason, s.t)
 

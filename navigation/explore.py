@@ -49,6 +49,7 @@ SWEEP_HALF_FOV_DEG = 40.0  # ...within this half-angle of the heading (perceptio
 SWEEP_MAX_TURN_DEG = 225.0  # the long way round is taken only up to this (ROTATE_TIMEOUT_S at ~45 deg/s is 270), degrees
 SWEEP_MIN_CELLS = 3  # ...and only when it sweeps at least this many unsearched wall-foot cells the short way does not, cells
 GLANCE_MIN_CELLS = 3  # a turn back glances first at unsearched wall feet within SEARCH_FACE_RADIUS_M only when the best heading outside its sweep holds this many (a sample nook is wider), cells
+GLANCE_MAX_EXTRA_DEG = 180.0  # ...and only when the glance adds at most this much turning to the turn back (~4 s at 45 deg/s; glancing at every turn back cost seeds 0, 3 and 7 40-70 s), degrees
 SIGHT_WALL_DEPTH_M = 0.7  # a line of sight sees mapped wall this deep past where it first meets wall, no deeper (map edges are a cell fuzzy; a rock in front hides the nook behind it: seeds 7, 15), m
 SIGHT_STEP_M = 0.2  # line-of-sight march step, m
 SIGHT_RAY_DEG = 2.0  # angle between lines of sight (0.14 m apart at 4 m, well under a cell), degrees
@@ -432,8 +433,8 @@ def face_heading(unsearched, pos, yaw_deg):
 def glance_heading(unsearched, pos, yaw_deg, target_deg):
     """World heading (deg) to face first, before a turn in place the short way from yaw_deg to target_deg:
     the one putting the most unsearched cells within SEARCH_FACE_RADIUS_M inside SEARCH_FACE_HALF_FOV_DEG
-    among headings the short turn does not sweep (nor start or end on), or None when it holds fewer than
-    GLANCE_MIN_CELLS.
+    among headings the short turn does not sweep (nor start or end on) and that add at most
+    GLANCE_MAX_EXTRA_DEG of turning, or None when it holds fewer than GLANCE_MIN_CELLS.
 
     A turn back happens where a path doubles back (an arm's tip, a pocket's end), which is where nooks
     are; the camera then faces the ones beside the dead end whichever side the rover came from.
@@ -454,6 +455,11 @@ def glance_heading(unsearched, pos, yaw_deg, target_deg):
     if cand.size == 0:
         return None
     headings = (float(yaw_deg) + way * cand) % 360.0
+    turned = (np.abs((headings - float(yaw_deg) + 180.0) % 360.0 - 180.0)
+              + np.abs((float(target_deg) - headings + 180.0) % 360.0 - 180.0))
+    headings = headings[turned - abs(err) <= GLANCE_MAX_EXTRA_DEG]
+    if headings.size == 0:
+        return None
     bearing = np.degrees(np.arctan2(dy, dx))
     off = np.abs((bearing[None, :] - headings[:, None] + 180.0) % 360.0 - 180.0)
     counts = (off <= h).sum(axis=1)

@@ -477,6 +477,11 @@ def test_a_turn_back_faces_unsearched_wall_feet_first_then_ends_at_the_wanted_he
     s = decision.Inputs(t, pos, 304.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 0)
     decision._start_rotation(fresh, s, 187.0, "path-behind")
     assert fresh.rotate_via is None and fresh.rotate_heading == 187.0, "all samples in: no glance"
+    fresh = decision.NavMemory()
+    fresh.unsearched = nav.unsearched
+    s = decision.Inputs(t, pos, 304.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+    decision._start_rotation(fresh, s, 187.0, "leave-pickup")
+    assert fresh.rotate_via is None, "leaving a pickup: no glance"
 
 
 def test_a_rock_approach_decided_again_after_a_stuck_gets_its_own_close_timeout():

@@ -476,6 +476,7 @@ def test_a_turn_back_glances_first_at_unsearched_wall_feet_it_would_not_sweep():
     assert explore.glance_heading(_feet_at(250.0, 3.5), pos, 304.0, 187.0) is None  # the short turn sweeps them
     assert explore.glance_heading(_feet_at(10.0, 7.0), pos, 304.0, 187.0) is None  # beyond SEARCH_FACE_RADIUS_M
     assert explore.glance_heading(np.zeros((200, 200), bool), pos, 304.0, 187.0) is None
+    assert explore.glance_heading(_feet_at(180.0, 3.5), pos, 0.0, 30.0) is None  # a glance back would add 300 deg
     one = np.zeros((200, 200), bool)
     one[98, 20] = True  # a single cell (a map speck) is no nook
     assert explore.glance_heading(one, pos, 304.0, 187.0) is None
