@@ -58,6 +58,7 @@ ROTATE_ENTER_DEG = 90.0  # a wanted heading further off than this is reached by 
 LEAVE_PICKUP_ROTATE_DEG = 30.0  # leaving a pickup spot (samples lie at wall feet), turn in place first when the way on is further off than this, degrees
 SWEEP_REASONS = ("path-behind", "leave-pickup")  # long turns in place that may go the long way round to sweep the camera over unsearched wall feet (explore.sweep_direction)
 GLANCE_REASONS = ("path-behind",)  # turns in place that may glance first at unsearched wall feet (explore.glance_heading): a path doubling back, not leaving a pickup (samples lie >= 5 m apart; glancing there too cost seeds 0, 3, 7 time)
+GLANCE_DEAD_END_REACH_M = 5.0  # ...and only at a dead end: no rover-wide corridor this long in the camera's view, m
 GLANCE_DONE_M = 3.0  # a turn back glances at unsearched wall feet once per place: not again this close, m
 SWEEP_COMMIT_DEG = 90.0  # ...the long way is kept while the heading error, on the far side, is larger than this, degrees
 ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
@@ -880,8 +881,9 @@ def _start_rotation(nav, s, heading_deg, reason):
 
 
 def _glance_first(nav, s):
-    """Before a turn back (the short way), turn first to face unsearched wall feet close by that the turn
-    would not sweep (explore.glance_heading), once per place (GLANCE_DONE_M).
+    """Before a turn back (the short way) at a dead end (GLANCE_DEAD_END_REACH_M), turn first to face
+    unsearched wall feet close by that the turn would not sweep (explore.glance_heading), once per
+    place (GLANCE_DONE_M).
 
     A turn back is where a path doubles back: an arm's tip, a pocket's end, a nook beside a dead end.
     On seed 15 the rover turned back 3.4 m from the east-nook sample with the nook 65 deg to its left
@@ -889,6 +891,9 @@ def _glance_first(nav, s):
     cell = grid.world_to_cell(s.pos)
     if cell is None or nav.glanced[cell]:
         return
+    corridor = reactive.width_limited(_frame_reach(s))
+    if corridor.size and float(corridor.max()) >= GLANCE_DEAD_END_REACH_M:
+        return  # a way on ahead: not a dead end (in the open hub a glance at every turn back cost 60-70 s)
     glance = explore.glance_heading(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
     if glance is None:
         return
