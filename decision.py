@@ -59,6 +59,7 @@ LEAVE_PICKUP_ROTATE_DEG = 30.0  # leaving a pickup spot (samples lie at wall fee
 SWEEP_REASONS = ("path-behind", "leave-pickup")  # long turns in place that may go the long way round to sweep the camera over unsearched wall feet (explore.sweep_direction)
 GLANCE_REASONS = ("path-behind",)  # turns in place that may glance first at unsearched wall feet (explore.glance_heading): a path doubling back, not leaving a pickup (samples lie >= 5 m apart; glancing there too cost seeds 0, 3, 7 time)
 GLANCE_DEAD_END_REACH_M = 5.0  # ...and only at a dead end: no rover-wide corridor this long in the camera's view, m
+GLANCE_HOLD_S = 0.5  # ...and holds still facing them this long, so a rock there is chosen before the turn back (turning straight on missed the east nook on seeds 51 and 52), s
 GLANCE_DONE_M = 3.0  # a turn back glances at unsearched wall feet once per place: not again this close, m
 SWEEP_COMMIT_DEG = 90.0  # ...the long way is kept while the heading error, on the far side, is larger than this, degrees
 ROTATE_EXIT_DEG = 12.0  # turning in place ends within this of the wanted heading, degrees
@@ -182,6 +183,7 @@ class NavMemory:
         self.turn_ref = None  # (t, yaw) since when turning in place has not changed the heading
         self.rotate_dir = None  # +1 / -1: this turn goes the long way round (sweeping unsearched wall feet); None: the short way
         self.rotate_via = None  # world yaw to turn to once rotate_heading (a glance at unsearched wall feet) is reached, or None
+        self.glance_hold_until = -math.inf  # a glance holds the rover still, facing the wall feet, until then, s
         self.glanced = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places a turn in place already glanced at unsearched wall feet
         self.unsearched = None  # unsearched wall feet (explore.unsearched_wall_feet) at the last plan with samples missing, or None
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
@@ -444,6 +446,8 @@ def _select_and_run(rover, nav, s):
             return "stop", cmd
     if _choose_rock(rover, nav, s):
         return _with_rotation("sample", mode_sample(rover, nav, s), nav)
+    if s.t < nav.glance_hold_until:
+        return "stop", Command(0.0, BRAKE_STOP, 0.0)  # a glance: the camera faces a nook for a moment
     if _should_search(nav, s):
         cmd = mode_search(rover, nav, s)
         if cmd is not None:
@@ -631,10 +635,9 @@ def mode_stop(nav, s):
             return Command(0.0, BRAKE_STOP, 0.0)
         return Command(0.0, 0.0, nav.rotate_dir * STEER_LIMIT_DEG)  # the long way round, until past the far side
     if abs(err) <= ROTATE_EXIT_DEG or s.t - nav.rotate_since > ROTATE_TIMEOUT_S:
-        if nav.rotate_via is not None:  # glanced at the unsearched wall feet: now on to the wanted heading
-            nav.rotate_heading, nav.rotate_via, nav.rotate_since, nav.rotate_dir = nav.rotate_via, None, s.t, None
-            return mode_stop(nav, s)
-        nav.rotate_heading = None
+        if nav.rotate_via is not None:  # facing the unsearched wall feet: hold still and let a rock there be chosen
+            nav.glance_hold_until = s.t + GLANCE_HOLD_S
+        nav.rotate_heading = nav.rotate_via = None
         return None
     if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
         return Command(0.0, BRAKE_STOP, 0.0)

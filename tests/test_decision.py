@@ -459,7 +459,7 @@ def test_a_turn_back_faces_unsearched_wall_feet_first_then_ends_at_the_wanted_he
     yaw, t, faced = 304.0, 10.0, False
     s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
     decision._start_rotation(nav, s, 187.0, "path-behind")
-    while nav.rotate_heading is not None and t < 10.0 + 2 * decision.ROTATE_TIMEOUT_S + 1.0:
+    while nav.rotate_heading is not None and t < 10.0 + decision.ROTATE_TIMEOUT_S + 1.0:
         s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
         cmd = decision.mode_stop(nav, s)
         if cmd is None:
@@ -468,10 +468,18 @@ def test_a_turn_back_faces_unsearched_wall_feet_first_then_ends_at_the_wanted_he
         faced |= abs((yaw - 20.0 + 180.0) % 360.0 - 180.0) < 15.0
         t += DT
     assert faced, "the camera faced the nook"
-    assert abs((yaw - 187.0 + 180.0) % 360.0 - 180.0) <= decision.ROTATE_EXIT_DEG + 3.0
-    s = decision.Inputs(t, pos, yaw + 117.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+    assert nav.glance_hold_until > t, "and holds still there so a rock in view can be chosen"
+    s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
     decision._start_rotation(nav, s, 187.0, "path-behind")
     assert nav.rotate_via is None, "glanced here already: the next turn back goes straight"
+    while nav.rotate_heading is not None and t < 30.0:
+        s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+        cmd = decision.mode_stop(nav, s)
+        if cmd is None:
+            break
+        yaw = (yaw + 3.0 * DT * cmd.steer) % 360.0
+        t += DT
+    assert abs((yaw - 187.0 + 180.0) % 360.0 - 180.0) <= decision.ROTATE_EXIT_DEG + 3.0
     fresh = decision.NavMemory()
     fresh.unsearched = nav.unsearched
     s = decision.Inputs(t, pos, 304.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 0)
@@ -482,6 +490,13 @@ def test_a_turn_back_faces_unsearched_wall_feet_first_then_ends_at_the_wanted_he
     s = decision.Inputs(t, pos, 304.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
     decision._start_rotation(fresh, s, 187.0, "leave-pickup")
     assert fresh.rotate_via is None, "leaving a pickup: no glance"
+    fresh = decision.NavMemory()
+    fresh.unsearched = nav.unsearched
+    angles = np.repeat(np.radians(np.arange(-40.0, 40.0, 0.5)), 20)
+    dists = np.tile(np.linspace(1.0, 8.0, 20), angles.size // 20)  # open floor 8 m ahead
+    s = decision.Inputs(t, pos, 304.0, 0.0, angles, dists, empty, empty, empty, empty, False, False, 1)
+    decision._start_rotation(fresh, s, 187.0, "path-behind")
+    assert fresh.rotate_via is None, "a way on ahead: no dead end, no glance"
 
 
 def test_a_rock_approach_decided_again_after_a_stuck_gets_its_own_close_timeout():
