@@ -405,6 +405,17 @@ def _unsearched_offsets_within(unsearched, pos, radius_m):
     return dx[near], dy[near]
 
 
+def _most_in_view(dx, dy, headings):
+    """(heading, count): of `headings` (deg, non-empty), the first that puts the most of the cells at
+    offsets (dx, dy) inside SEARCH_FACE_HALF_FOV_DEG, and how many it puts there (face_heading and
+    glance_heading choose where to look by this count)."""
+    bearing = np.degrees(np.arctan2(dy, dx))
+    off = np.abs((bearing[None, :] - headings[:, None] + 180.0) % 360.0 - 180.0)
+    counts = (off <= SEARCH_FACE_HALF_FOV_DEG).sum(axis=1)
+    best = int(np.argmax(counts))
+    return float(headings[best]), int(counts[best])
+
+
 def face_heading(unsearched, pos, yaw_deg):
     """World heading (deg) that puts the most unsearched cells within SEARCH_FACE_RADIUS_M of `pos`
     inside SEARCH_FACE_HALF_FOV_DEG, or None when fewer than SEARCH_FACE_MIN_CELLS would be in view
@@ -418,16 +429,12 @@ def face_heading(unsearched, pos, yaw_deg):
     dx, dy = _unsearched_offsets_within(unsearched, pos, SEARCH_FACE_RADIUS_M)
     if len(dx) < SEARCH_FACE_MIN_CELLS:
         return None
-    bearing = np.degrees(np.arctan2(dy, dx))
-    headings = np.arange(0.0, 360.0, SEARCH_FACE_STEP_DEG)
-    off = np.abs((bearing[None, :] - headings[:, None] + 180.0) % 360.0 - 180.0)
-    counts = (off <= SEARCH_FACE_HALF_FOV_DEG).sum(axis=1)
-    best = int(np.argmax(counts))
-    if counts[best] < SEARCH_FACE_MIN_CELLS:
+    heading, count = _most_in_view(dx, dy, np.arange(0.0, 360.0, SEARCH_FACE_STEP_DEG))
+    if count < SEARCH_FACE_MIN_CELLS:
         return None
-    if abs((headings[best] - yaw_deg + 180.0) % 360.0 - 180.0) <= SEARCH_FACE_HALF_FOV_DEG:
+    if abs((heading - yaw_deg + 180.0) % 360.0 - 180.0) <= SEARCH_FACE_HALF_FOV_DEG:
         return None
-    return float(headings[best])
+    return heading
 
 
 def glance_heading(unsearched, pos, yaw_deg, target_deg):
@@ -460,13 +467,8 @@ def glance_heading(unsearched, pos, yaw_deg, target_deg):
     headings = headings[turned - abs(err) <= GLANCE_MAX_EXTRA_DEG]
     if headings.size == 0:
         return None
-    bearing = np.degrees(np.arctan2(dy, dx))
-    off = np.abs((bearing[None, :] - headings[:, None] + 180.0) % 360.0 - 180.0)
-    counts = (off <= h).sum(axis=1)
-    best = int(np.argmax(counts))
-    if counts[best] < GLANCE_MIN_CELLS:
-        return None
-    return float(headings[best])
+    heading, count = _most_in_view(dx, dy, headings)
+    return heading if count >= GLANCE_MIN_CELLS else None
 
 
 def sweep_direction(unsearched, pos, yaw_deg, target_deg):
