@@ -103,6 +103,7 @@ ROCK_MERGE_RADIUS_M = 2.0  # detections closer than this to a known rock refine 
 ROCK_MIN_HITS = 3  # detections needed before a rock is reported in rocks_world
 ROCK_SUPPRESS_RADIUS_M = 5.0  # a weak cluster this close to a much stronger one is an echo of it, m
 ROCK_SUPPRESS_RATIO = 5.0  # "much stronger": this many times the weight
+FAST_WORLDMAP = True  # render_worldmap through the compiled kernel (False: the NumPy rules, its reference)
 ROCK_MARK_HALF_PX = 1  # rocks are drawn as (2*half+1)^2 green squares on the worldmap
 
 # --- display ---
@@ -454,15 +455,10 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
     if out is None:
         out = np.zeros((WORLD_SIZE, WORLD_SIZE, 3), np.uint8)
     y0, y1, x0, x1 = (0, WORLD_SIZE, 0, WORLD_SIZE) if window is None else window
-    if drive:
-        seen, is_nav = _majority_navigable(mem, y0, y1, x0, x1, drive=True)
-    elif y1 > y0 and x1 > x0:
-        y0, y1, x0, x1 = _grown(y0, y1, x0, x1)
-        seen, is_nav = _filled_navigable(mem, y0, y1, x0, x1)
+    if FAST_WORLDMAP:
+        _worldmap_fast(mem, out, y0, y1, x0, x1, drive)
     else:
-        seen = is_nav = np.zeros((0, 0), bool)
-    out[y0:y1, x0:x1, 2] = is_nav.view(np.uint8) * np.uint8(255)
-    out[y0:y1, x0:x1, 0] = (seen & ~is_nav).view(np.uint8) * np.uint8(255)
+        _worldmap_numpy(mem, out, y0, y1, x0, x1, drive)
     if drive:
         return out
     rocks = rocks_from_memory(mem)
@@ -474,6 +470,107 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
             out[max(iy - h, 0):iy + h + 1, max(ix - h, 0):ix + h + 1, 1] = 255
         mem.drawn_rocks = rocks
     return out
+
+
+def _worldmap_numpy(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, drive: bool):
+    """render_worldmap's R/B rebuild of the window by the NumPy rules (the reference of `_worldmap_fast`)."""
+    if drive:
+        seen, is_nav = _majority_navigable(mem, y0, y1, x0, x1, drive=True)
+    elif y1 > y0 and x1 > x0:
+        y0, y1, x0, x1 = _grown(y0, y1, x0, x1)
+        seen, is_nav = _filled_navigable(mem, y0, y1, x0, x1)
+    else:
+        seen = is_nav = np.zeros((0, 0), bool)
+    out[y0:y1, x0:x1, 2] = is_nav.view(np.uint8) * np.uint8(255)
+    out[y0:y1, x0:x1, 0] = (seen & ~is_nav).view(np.uint8) * np.uint8(255)
+
+
+def _worldmap_fast(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, drive: bool):
+    """render_worldmap's R/B rebuild of the window in one compiled pass (`_worldmap_kernel`): the same bytes
+    as the NumPy rules below (`_majority_navigable`, `band_light_share`, `_filled_navigable`; the reference,
+    tests/test_fast_paths_exact.py), at a fraction of their ~40 small-array calls per frame."""
+    if drive:
+        gy0, gy1, gx0, gx1 = y0, y1, x0, x1
+        py0, py1, px0, px1 = y0, y1, x0, x1
+    elif y1 > y0 and x1 > x0:
+        gy0, gy1, gx0, gx1 = _grown(y0, y1, x0, x1)
+        py0, py1, px0, px1 = _grown(gy0, gy1, gx0, gx1)
+    else:
+        return
+    if gy1 <= gy0 or gx1 <= gx0:
+        return
+    f32 = np.float32  # NumPy compares and scales a float32 array by a Python float in float32 (NEP 50)
+    _worldmap_kernel(mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.band_nav_votes,
+                     mem.band_votes, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive, f32(MIN_CELL_VOTES),
+                     f32(NAV_MAJORITY), f32(SCORED_NAV_MAJORITY), f32(SCORED_BAND_MIN_SHARE), f32(SCORED_BAND_SHARE),
+                     f32(SHADE_MAJORITY), int(FILL_MIN_NEIGHBOURS), f32(FILL_MIN_SAND_SHARE), out)
+
+
+@njit(cache=True)
+def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, band_nav, band_all, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive,
+                     min_votes, nav_major, scored_major, band_min_share, band_share, shade_major, fill_neighbours,
+                     fill_sand, out):
+    """Cells of (py0:py1, px0:px1) classified by the vote-share rules (drive: light sand only; else the scored map's
+    band rule plus shadowed sand), then on (gy0:gy1, gx0:gx1) the scored map's neighbour fill (not drive), written
+    to out's R (seen, not navigable) and B (navigable) channels as 0/255.
+
+    Bit-exactness with the NumPy rules: every sum, product and comparison in float32 as NumPy does them on float32
+    arrays with Python-float constants (the constants arrive as float32); the band sums in band order, as
+    ``sum(axis=0)`` adds them; the mean share as float64 sum / count rounded to float32, as NumPy's float32 / int64
+    division and ``astype(float32)`` give it. No fastmath (no reassociation, no fused multiply-add)."""
+    ph, pw = py1 - py0, px1 - px0
+    bands = band_nav.shape[0]
+    seen = np.zeros((ph, pw), np.uint8)
+    is_nav = np.zeros((ph, pw), np.uint8)
+    for i in range(ph):
+        yy = py0 + i
+        for j in range(pw):
+            xx = px0 + j
+            nav = nav_v[yy, xx]
+            total = nav + obs_v[yy, xx]
+            if not total >= min_votes:
+                continue
+            seen[i, j] = 1
+            if drive:
+                is_nav[i, j] = nav > nav_major * total
+                continue
+            band_sum = band_all[0, yy, xx]
+            for b in range(1, bands):
+                band_sum = band_sum + band_all[b, yy, xx]
+            need = band_min_share * band_sum
+            share_sum = np.float32(0.0)
+            count = 0
+            for b in range(bands):
+                bt = band_all[b, yy, xx]
+                if bt >= min_votes and bt >= need:
+                    share_sum = share_sum + band_nav[b, yy, xx] / bt
+                    count += 1
+                else:
+                    share_sum = share_sum + np.float32(0.0)
+            if count > 0:
+                light = np.float32(np.float64(share_sum) / np.float64(count)) > band_share
+            else:
+                light = nav > scored_major * total
+            sand = (nav + shade_v[yy, xx]) + dim_v[yy, xx]
+            is_nav[i, j] = light or sand > shade_major * total
+    for yy in range(gy0, gy1):
+        i = yy - py0
+        for xx in range(gx0, gx1):
+            j = xx - px0
+            nav_here = is_nav[i, j]
+            if not drive and seen[i, j] and not nav_here:
+                neighbours = 0
+                for di in range(-1, 2):
+                    for dj in range(-1, 2):
+                        ii, jj = i + di, j + dj
+                        if (di != 0 or dj != 0) and 0 <= ii < ph and 0 <= jj < pw:
+                            neighbours += is_nav[ii, jj]
+                if neighbours >= fill_neighbours:
+                    total = nav_v[yy, xx] + obs_v[yy, xx]
+                    sand = (nav_v[yy, xx] + shade_v[yy, xx]) + dim_v[yy, xx]
+                    nav_here = sand >= fill_sand * total
+            out[yy, xx, 2] = 255 if nav_here else 0
+            out[yy, xx, 0] = 255 if (seen[i, j] and not nav_here) else 0
 
 
 def _majority_navigable(mem: PerceptionMemory, y0, y1, x0, x1, drive=False, dim_shade=True, scored=False):

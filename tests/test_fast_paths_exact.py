@@ -230,3 +230,44 @@ def test_scalar_clamp_equals_numpy_clip_bit_for_bit():
             want, got = float(np.clip(v, lo, hi)), clamp(v, lo, hi)
             assert type(got) is float
             assert (math.isnan(want) and math.isnan(got)) or (want == got and math.copysign(1, want) == math.copysign(1, got))
+
+
+def _tie_votes(rng, shape):
+    """float32 votes from a few exact levels, so shares land exactly on and next to the rules' thresholds."""
+    levels = np.array([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 0.75, 0.1, 0.35, 0.25], np.float32)
+    v = levels[rng.integers(0, levels.size, shape)] * np.float32(rng.choice([1.0, 2.0, 7.0]))
+    jitter = rng.random(shape) < 0.2  # some cells a float32 step off the level
+    return np.where(jitter, np.nextafter(v, np.float32(10.0)), v).astype(np.float32)
+
+
+def test_worldmap_kernel_equals_the_numpy_rules():
+    """render_worldmap's compiled window rebuild writes exactly the bytes of the NumPy rules (scored map with its
+    band rule and neighbour fill, and the drive map), on windows inside the map, on its edges and the whole map."""
+    rng = np.random.default_rng(7)
+    differing = 0
+    for trial in range(60):
+        mem = P.PerceptionMemory()
+        for votes in (mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes):
+            votes[...] = _tie_votes(rng, votes.shape)
+        mem.band_votes[...] = _tie_votes(rng, mem.band_votes.shape)
+        mem.band_nav_votes[...] = np.minimum(_tie_votes(rng, mem.band_votes.shape), mem.band_votes)
+        if trial % 3 == 0:  # shares exactly at the thresholds
+            mem.nav_votes[...] = np.float32(P.SCORED_NAV_MAJORITY) * (mem.nav_votes + mem.obs_votes)
+        y0, x0 = (int(a) for a in rng.integers(0, P.WORLD_SIZE - 1, 2))
+        window = [(y0, min(y0 + int(rng.integers(1, 40)), P.WORLD_SIZE), x0, min(x0 + int(rng.integers(1, 40)),
+                                                                                  P.WORLD_SIZE)),
+                  (0, 12, 190, 200), (195, 200, 0, 7), (0, 0, 0, 0), None][trial % 5]
+        for drive in (False, True):
+            if window == (0, 0, 0, 0) and drive:
+                continue
+            start = rng.integers(0, 256, (P.WORLD_SIZE, P.WORLD_SIZE, 3), dtype=np.uint8)
+            fast, ref = start.copy(), start.copy()
+            try:
+                P.FAST_WORLDMAP = False
+                P.render_worldmap(mem, ref, window, drive=drive)
+            finally:
+                P.FAST_WORLDMAP = True
+            P.render_worldmap(mem, fast, window, drive=drive)
+            assert np.array_equal(fast, ref), (trial, window, drive)
+            differing += int((fast != start).any())
+    assert differing > 30  # the windows were really rewritten
