@@ -31,10 +31,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from sim import contact as C
+from sim import scene
 
 PHYSICS_DT = 0.02  # s, Unity fixed timestep
+FAST_CONTACTS = True  # open-ground contact tests and wheel heights through compiled calls (False: NumPy only)
 GRAVITY = 9.81  # m/s^2
 
 # --- longitudinal dynamics (fitted to test_dataset + megalphian logs) ---------
@@ -83,6 +86,43 @@ TERRAIN_SLOPE_PROBE_M = 0.1  # m, half distance of the terrain-gradient probe at
 SIDE_GRIP = 1.0  # tan of the steepest roll the tyres hold without sliding sideways (sideways friction
 # asymptote 1.0; a real rover drove 27 m at up to 38 deg of roll)
 MIN_WALL_TAN = 0.25  # terrain contacts on gentler slopes push out at most overlap / this
+
+
+@njit(cache=True, nogil=True)
+def _wheel_ground(x, y, c, s, wheel_f, wheel_l, grid, size_m, cell_m, floor_m):
+    """`_ground_at(*_to_world(...))` for the four wheels in one compiled call: the same operations in the same
+    order (x + f c - l s, y + f s + l c, the world's compiled bilinear, NumPy's NaN-keeping maximum)."""
+    n = wheel_f.size
+    xs = np.empty(n)
+    ys = np.empty(n)
+    for i in range(n):
+        xs[i] = x + wheel_f[i] * c - wheel_l[i] * s
+        ys[i] = y + wheel_f[i] * s + wheel_l[i] * c
+    h = np.empty(n)
+    scene._clamped_bilinear(grid, xs, ys, size_m, cell_m, h)
+    for i in range(n):
+        if not (h[i] != h[i] or h[i] >= floor_m):
+            h[i] = floor_m
+    return h
+
+
+@njit(cache=True, nogil=True)
+def _terrain_touches(x, y, c, s, bp, z0, a, b, grid, size_m, cell_m):
+    """True when the terrain rises above the bottom of any body point at this pose (contacts' first test, with
+    the same arithmetic: point = pose + rotated offset, plane = z0 + a f + b l, bottom = plane + offset)."""
+    n = bp.shape[0]
+    xs = np.empty(n)
+    ys = np.empty(n)
+    for i in range(n):
+        xs[i] = x + bp[i, 0] * c - bp[i, 1] * s
+        ys[i] = y + bp[i, 0] * s + bp[i, 1] * c
+    t = np.empty(n)
+    scene._clamped_bilinear(grid, xs, ys, size_m, cell_m, t)
+    for i in range(n):
+        bottom = (z0 + a * bp[i, 0] + b * bp[i, 1]) + bp[i, 2]
+        if t[i] - bottom > 0:
+            return True
+    return False
 
 
 @dataclass
@@ -187,11 +227,24 @@ class RoverPhysics:
         """What a wheel ray always finds: the terrain or the floor plane 1 cm above it."""
         return np.maximum(np.asarray(self.world.height_at(px, py), dtype=np.float64), C.FLOOR_PLANE_M)
 
+    def _compiled_terrain(self) -> bool:
+        """The world's heights are the plain bilinear terrain `_clamped_bilinear` computes (World.height_at's own
+        compiled path), so the fast paths below may read them directly."""
+        w = self.world
+        return (type(w).height_at is scene.World.height_at and w.terrain_height.ndim == 2
+                and w.terrain_height.shape[0] == w.terrain_height.shape[1])
+
     def _wheel_heights(self, x, y, yaw_deg) -> np.ndarray:
         """Contact height under each wheel: ground, or a rock top the wheel's ray reaches from where it stood."""
+        near = self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1)
+        if not near and FAST_CONTACTS and self._compiled_terrain():
+            # no rock patch near: the ground under the wheels, in one compiled call (the same arithmetic)
+            yaw = math.radians(yaw_deg)
+            w = self.world
+            return _wheel_ground(float(x), float(y), math.cos(yaw), math.sin(yaw), self._wheel_f, self._wheel_l,
+                                 w.terrain_height, float(w.size_m), float(w.terrain_cell_m), C.FLOOR_PLANE_M)
         wx, wy = self._to_world(x, y, yaw_deg, self._wheel_f, self._wheel_l)
         h = self._ground_at(wx, wy)
-        near = self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1)
         if near:
             _, top, _, _, _ = C.RockField.query(near, wx, wy)
             found = (top > h) & (top <= self._wheel_h + C.WHEEL_REACH_M)
@@ -213,8 +266,16 @@ class RoverPhysics:
         if wheel_h is None:
             wheel_h = self._wheel_heights(x, y, yaw_deg)
         bp = C.BODY_POINTS
-        px, py = self._to_world(x, y, yaw_deg, bp[:, 0], bp[:, 1])
         z0, a, b = self._plane(wheel_h)
+        if FAST_CONTACTS and not self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1) and self._compiled_terrain():
+            # open ground (the common step): one compiled test that no body point is under the terrain
+            yaw = math.radians(yaw_deg)
+            w = self.world
+            if not _terrain_touches(float(x), float(y), math.cos(yaw), math.sin(yaw), bp, float(z0), float(a),
+                                    float(b), w.terrain_height, float(w.size_m), float(w.terrain_cell_m)):
+                empty = np.zeros(0)
+                return empty, empty, empty
+        px, py = self._to_world(x, y, yaw_deg, bp[:, 0], bp[:, 1])
         plane = z0 + a * bp[:, 0] + b * bp[:, 1]
         bottom, top = plane + bp[:, 2], plane + bp[:, 3]
         depths, dxs, dys = [], [], []

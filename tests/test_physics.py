@@ -429,3 +429,42 @@ def test_real_world_rocks_and_wall_slopes_stop_the_rover(real_world):
         heights.append(world.height_at(body.state.x, body.state.y))
     assert max(heights) < 2.0  # the wheels climb the foot of the wall, gravity stops them
     assert world.height_at(body.state.x, body.state.y) < 1.0
+
+
+def test_compiled_contact_paths_equal_numpy():
+    """The compiled open-ground paths (wheel heights, the terrain-overlap test) give the NumPy answers bit for bit:
+    wheel heights and contacts at random poses on rough terrain with rocks, and whole drives (every step's state)."""
+    from sim.world import load_world
+
+    world = load_world("procedural:0")
+    rng = np.random.default_rng(3)
+    rows, cols = np.nonzero(world.nav_truth)
+    pick = rng.integers(0, rows.size, 400)
+    poses = [(cols[i] + rng.uniform(-1.5, 1.5), rows[i] + rng.uniform(-1.5, 1.5), rng.uniform(0, 360)) for i in pick]
+    starts = [poses[k] for k in range(1, 6)]
+    commands = [P.Controls(throttle=float(rng.uniform(-0.5, 1.0)), steer=float(rng.uniform(-15, 15)))
+                for _ in range(40)]
+    answers = {}
+    for fast in (True, False):
+        P.FAST_CONTACTS = fast
+        try:
+            body = P.RoverPhysics(world, *poses[0])
+            found = []
+            for x, y, yaw in poses:
+                body._wheel_h = body._wheel_heights(x, y, yaw)
+                found.append((body._wheel_h.copy(), *body.contacts(x, y, yaw)))
+            states = []
+            for start in starts:
+                body = P.RoverPhysics(world, *start)
+                for k in range(800):
+                    body.step(commands[k // 20])
+                    states.append(tuple(vars(body.state).values()))
+            answers[fast] = found, states
+        finally:
+            P.FAST_CONTACTS = True
+    (found_fast, states_fast), (found_ref, states_ref) = answers[True], answers[False]
+    for a, b in zip(found_fast, found_ref):
+        assert all(np.array_equal(p, q) for p, q in zip(a, b))
+    assert sum(a[1].size > 0 for a in found_fast) > 5  # some poses really touch terrain or rock
+    assert states_fast == states_ref
+    assert sum(s[list(vars(body.state)).index("collided")] for s in states_fast) > 0  # the drives hit something
