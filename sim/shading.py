@@ -76,6 +76,9 @@ MIN_FOOT_HEIGHT_M = 0.2  # pixels nearer than sqrt(texel x focal x this) skip th
 ROCK_HIT_ABOVE_GROUND_M = 0.05  # a hit this far above the terrain is a rock mesh, drawn without the splat map, m
 CAST_SHADOW_FACTOR = 0.82  # brightness of the terrain-shadowed floor at the quality levels with cast shadows, 0..1
 CAST_SHADOW_COVER = (0.1, 0.3)  # blurred shadow raster values over which the cast shadow ramps from none to full, 0..1
+WALL_FOOT_RED_GAIN = 0.012  # extra red of the sand-rock blend at the wall feet (item 6; red only: never the darkest channel), fraction
+WALL_FOOT_RED_FULL_BELOW = 0.70  # ... in full at and below this sand weight, 0..1
+WALL_FOOT_RED_NONE_FROM = 0.80  # ... fading to none at this sand weight (open floor keeps the colour table's hue), 0..1
 
 
 def shadowless_darkening(dist_m) -> np.ndarray:
@@ -101,6 +104,14 @@ def cast_shadow_cover(shadow: np.ndarray) -> np.ndarray:
     blurred shadow raster, so the shadow is one flat step reaching its fringe, as the real frames show."""
     lo, hi = CAST_SHADOW_COVER
     return np.clip((np.asarray(shadow, np.float32) - lo) / (hi - lo), 0.0, 1.0)
+
+
+def wall_foot_red_gain(sand: np.ndarray) -> np.ndarray:
+    """Factor on the red channel of the terrain colour by sand weight (item 6): the real wall-foot floor is
+    redder than the colour table draws it, which only the client's shadowed-sand colour test sees."""
+    lo, hi = WALL_FOOT_RED_FULL_BELOW, WALL_FOOT_RED_NONE_FROM
+    ramp = np.clip((hi - np.asarray(sand, np.float32)) / (hi - lo), 0.0, 1.0)
+    return (1.0 + WALL_FOOT_RED_GAIN * ramp).astype(np.float32)
 
 
 def splat_pyramid(sand_weight: np.ndarray) -> np.ndarray:

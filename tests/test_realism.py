@@ -125,3 +125,19 @@ def test_shadow_detection_tells_the_quality_levels_apart(real_logs_dir, world_di
         on, ratio = realism.detect_shadows(realism.read_frames(find_log(real_logs_dir / name)), world)
         assert on is want and ratio is not None, (name, ratio)
         assert abs(ratio - realism.DETECT_RATIO) > 0.04, (name, ratio)  # far from the line, not a coin toss
+
+
+def test_weighted_near_mean_discounts_tiny_regions():
+    """A frame whose 5 m union is 30 px weighs 30 / 219 of a frame with 2,000 (sim.realism.near_weights); the
+    plain per-frame mean is unchanged beside it."""
+    region_px = int(np.count_nonzero(realism.standard_warp()[2]))
+    full = realism.NEAR_FULL_WEIGHT_SHARE * region_px
+    near = np.array([0.0, 1.0, 0.9])
+    whole = np.array([0.5, 0.8, 0.8])
+    unions = [30, 2000, int(full)]
+    s = realism.summarise(near, whole, [True, True, True], unions)
+    w0 = 30 / full
+    assert s["near_5m_moving_mean"] == pytest.approx(1.9 / 3)
+    assert s["near_5m_moving_weighted"] == pytest.approx((1.0 + 0.9) / (w0 + 2.0), rel=1e-3)
+    assert s["near_5m_weighted"] == s["near_5m_moving_weighted"]
+    assert realism.near_weights([0, full / 2, 5 * full]).tolist() == pytest.approx([0.0, 0.5, 1.0])
