@@ -171,3 +171,44 @@ def test_cast_shadow_is_one_flat_step_reaching_the_fringe():
     assert cover[raster >= CAST_SHADOW_COVER[1]].min() == 1.0
     assert np.all(np.diff(cover) >= 0)
     assert cast_shadow_cover(np.array([0.5]))[0] == 1.0  # the raster's half-shadow is full shadow
+
+
+def test_floor_red_gain_reddens_wall_feet_and_shaded_floor_only():
+    """Item 6: red x(1 + WALL_FOOT_RED_GAIN) at and below weight 0.70, none from 0.80; shaded floor redder per unit
+    of darkening; open sunlit floor keeps the colour table's hue."""
+    sand = np.array([0.3, shading.WALL_FOOT_RED_FULL_BELOW, 0.75, shading.WALL_FOOT_RED_NONE_FROM, 1.0])
+    sun = shading.floor_red_gain(sand, np.zeros_like(sand))
+    assert sun[0] == sun[1] == pytest.approx(1.0 + shading.WALL_FOOT_RED_GAIN)
+    assert sun[1] > sun[2] > sun[3] == sun[4] == 1.0
+    shade = shading.floor_red_gain(sand, np.full_like(sand, 0.18))
+    assert np.all(shade > sun)
+    assert shade[4] == pytest.approx(1.0 + 0.18 * shading.SHADOW_RED_PER_DARKENING)
+
+
+@pytest.mark.parametrize("shadows", [False, True])
+def test_floor_red_gain_leaves_the_starter_threshold_alone(shadows, monkeypatch):
+    """The gain raises red only, never sand's darkest channel: frames with and without it differ in red alone, and
+    the starter's navigable mask (every channel > 160) is the same pixel for pixel."""
+    from dataclasses import replace
+
+    from sim.world import load_world
+
+    world = with_shadows(load_world("procedural:0"), shadows)
+    poses = _poses_on_floor(world, 5, 7)
+
+    def frames():
+        renderer = Renderer(replace(world))  # a fresh World object: baked anew
+        renderer.column_share_m = 0.0  # every column marched (which columns are shared depends on colour)
+        return [renderer.render(p) for p in poses]
+
+    shipped = frames()
+    monkeypatch.setattr(shading, "WALL_FOOT_RED_GAIN", 0.0)
+    monkeypatch.setattr(shading, "SHADOW_RED_PER_DARKENING", 0.0)
+    plain = frames()
+    redder = 0
+    for a, b in zip(shipped, plain):
+        assert np.array_equal(a[..., 1:], b[..., 1:])
+        assert np.all(a[..., 0] >= b[..., 0])
+        redder += int(np.count_nonzero(a[..., 0] > b[..., 0]))
+        assert np.array_equal(np.all(a > 160, axis=2), np.all(b > 160, axis=2))
+    assert redder > 1000  # the gain is exercised
