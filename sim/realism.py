@@ -5,7 +5,10 @@ both images go through the starter's pipeline (RGB > 160 on every channel = navi
 standard top-down warp) and the masks are compared inside the camera's field of view:
 within 5 m of the rover and over the whole warped view.  Figures are given over all frames
 and over the frames where the rover moves (|speed| >= MOVING_MIN_SPEED; keys with `moving`
-in metrics.json), per shadows setting, with side-by-side images of the worst places.
+in metrics.json), per shadows setting, with side-by-side images of the worst places.  Beside issue 28's plain
+per-frame mean within 5 m, `..._weighted` gives each frame a weight growing with its 5 m union up to a tenth of
+the region (round 5, docs/twin-realism.md): a frame facing a wall with 30 navigable pixels near it is a ratio of
+tiny counts.  The exit status keeps the plain mean.
 
     python -m sim.realism [--log test_dataset|NAME|PATH] [--stride 1] [--shadows auto|off|on|both]
                           [--tracks on|off] [--out out/realism] [--examples 6]
