@@ -36,7 +36,7 @@ from typing import Optional
 import numpy as np
 
 import perception
-from navigation import approach, astar, explore, grid, predict, pursuit, reactive, stuck
+from navigation import approach, astar, explore, grid, predict, pursuit, reactive, rockmem, stuck
 
 log = logging.getLogger(__name__)
 
@@ -226,6 +226,10 @@ class NavMemory:
         self.stage_done = False  # the staging point was reached and the rover faced the rock
         self.collected = []  # world (x, y) of collected samples
         self.rock_skip = []  # (x, y, until_t)
+        self.rock_refuted = []  # (x, y, best_pixels): approached and not found (navigation.rockmem)
+        self.rock_came_close = False  # this attempt brought the rover within SAMPLE_VISUAL_M of the target
+        self.rock_seen_close = False  # ...and the camera showed the target within SAMPLE_VISUAL_M
+        self.rock_best_px = 0  # most rock pixels of any camera sighting matched to the target this attempt
         self.pickup_sent_at = -math.inf
         self.was_picking = False
         self.last_collect_t = -math.inf  # when the last collection was registered, s
@@ -498,8 +502,7 @@ def _span(hist, col_x, col_y):
 def _abandon_goal(nav, s):
     """Give up whatever the rover is heading for (the planner will pick something else)."""
     if nav.rock_target is not None:
-        nav.rock_skip.append((nav.rock_target[0], nav.rock_target[1], s.t + ROCK_SKIP_S))
-        nav.rock_target = None
+        _give_up_rock(nav, s)
     elif nav.path_goal is not None and nav.path_goal[0] == "frontier" and nav.path_goal[1] is not None:
         _give_up_frontier(nav)
     nav.path_goal = None
@@ -736,11 +739,11 @@ def mode_sample(rover, nav, s):
     dist = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1])
     if dist <= SAMPLE_VISUAL_M and nav.rock_close_since is None:
         nav.rock_close_since = s.t
+    nav.rock_came_close |= dist <= SAMPLE_VISUAL_M
     close_for = s.t - nav.rock_close_since if nav.rock_close_since is not None else 0.0
     if s.t - nav.rock_since > SAMPLE_TIMEOUT_S or close_for > SAMPLE_CLOSE_TIMEOUT_S:
         log.info("giving up rock at (%.1f, %.1f) for now", *nav.rock_target)
-        nav.rock_skip.append((nav.rock_target[0], nav.rock_target[1], s.t + ROCK_SKIP_S))
-        nav.rock_target = None
+        _give_up_rock(nav, s)
         nav.path_goal = None
         return Command(0.0, BRAKE_STOP, 0.0)
     staged = _stage_approach(rover, nav, s, dist)
@@ -1191,7 +1194,50 @@ def _rock_is_known_done(nav, xy, t):
     for x, y, until in nav.rock_skip:
         if t < until and math.hypot(xy[0] - x, xy[1] - y) < ROCK_SAME_M:
             return True
-    return False
+    return rockmem.nearest_refuted(nav.rock_refuted, xy, ROCK_SAME_M) is not None
+
+
+def _new_rock_attempt(nav):
+    """Forget the camera evidence gathered for the previous target (see _give_up_rock)."""
+    nav.rock_came_close = nav.rock_seen_close = False
+    nav.rock_best_px = 0
+
+
+def _give_up_rock(nav, s):
+    """Drop the target rock: refuted for good when the rover came close and the camera never showed
+    it there (a misprojected far sighting: seed 5's phantom was chosen 7 times on a 60 s skip), else
+    skipped for ROCK_SKIP_S (a real rock that was hard to reach is tried again)."""
+    xy = nav.rock_target
+    close = nav.rock_came_close or math.hypot(xy[0] - s.pos[0], xy[1] - s.pos[1]) <= SAMPLE_VISUAL_M
+    if rockmem.was_refuted(close, nav.rock_seen_close):
+        log.info("rock at (%.1f, %.1f) approached and not found: refuted", *xy)
+        nav.rock_refuted = rockmem.add_refuted(nav.rock_refuted, xy, nav.rock_best_px, ROCK_SAME_M)
+    nav.rock_skip.append((xy[0], xy[1], s.t + ROCK_SKIP_S))
+    nav.rock_target = None
+    _new_rock_attempt(nav)
+
+
+def _camera_rock_refuted(nav, xy, pixels, dist):
+    """Is this camera sighting at a refuted spot without stronger evidence? A sighting close by
+    with more pixels than the refuting attempt saw lifts the refutation."""
+    k = rockmem.nearest_refuted(nav.rock_refuted, xy, ROCK_SAME_M)
+    if k is None:
+        return False
+    if rockmem.revives(nav.rock_refuted[k][2], pixels, dist, SAMPLE_VISUAL_M):
+        log.info("rock at (%.1f, %.1f) seen again from %.1f m with %d px: no longer refuted", *xy, dist, pixels)
+        nav.rock_refuted = nav.rock_refuted[:k] + nav.rock_refuted[k + 1:]
+        return False
+    return True
+
+
+def _switch_rock(nav, s, xy, lost):
+    """The camera shows another rock than the target: when the rover stood at the target and never
+    saw it there ('lost'), the camera found the real rock elsewhere and the target is refuted."""
+    old = nav.rock_target
+    if lost and not nav.rock_seen_close and math.hypot(xy[0] - old[0], xy[1] - old[1]) >= ROCK_SAME_M:
+        log.info("rock at (%.1f, %.1f) not there, the camera shows one at (%.1f, %.1f): refuted", *old, *xy)
+        nav.rock_refuted = rockmem.add_refuted(nav.rock_refuted, old, nav.rock_best_px, ROCK_SAME_M)
+    _new_rock_attempt(nav)
 
 
 def _choose_rock(rover, nav, s):
@@ -1212,13 +1258,19 @@ def _choose_rock(rover, nav, s):
         # the rover is (nearly) at the remembered spot and the camera does not show the rock there:
         # the estimate was off (a far sighting can be 2-3 m out), so trust the rock the camera sees
         lost = target_d <= SAMPLE_VISUAL_M and s.t - nav.rock_seen_time > SAMPLE_VISION_MEMORY_S
-        if dist <= ROCK_CHASE_M and not _rock_is_known_done(nav, xy, s.t) and (
-                nav.rock_target is None or same or nearer or lost):
+        pixels = int(np.count_nonzero(s.rock_dists <= dist + ROCK_SAME_M / 2))
+        if dist <= ROCK_CHASE_M and not _camera_rock_refuted(nav, xy, pixels, dist) \
+                and not _rock_is_known_done(nav, xy, s.t) and (nav.rock_target is None or same or nearer or lost):
             if nav.rock_target is None:
                 nav.rock_since = s.t
                 nav.rock_close_since = None
+                _new_rock_attempt(nav)
+            elif not same:
+                _switch_rock(nav, s, xy, lost)
             nav.rock_target = xy
             nav.rock_seen_time = s.t
+            nav.rock_best_px = max(nav.rock_best_px, pixels)
+            nav.rock_seen_close |= dist <= SAMPLE_VISUAL_M
             nav.rock_bearing, nav.rock_dist = ang, dist
             return True
     if nav.rock_target is not None:
@@ -1238,6 +1290,7 @@ def _choose_rock(rover, nav, s):
         if d < best_d:
             best, best_d = xy, d
     if best is not None and (best_d <= ROCK_DETOUR_M or nav.explored):
+        _new_rock_attempt(nav)
         nav.rock_target = best
         nav.rock_since = s.t
         nav.rock_close_since = None
