@@ -36,7 +36,7 @@ from typing import Optional
 import numpy as np
 
 import perception
-from navigation import approach, astar, explore, grid, predict, pursuit, reactive, rockmem, stuck
+from navigation import approach, astar, explore, grid, predict, pursuit, reactive, rockmem, stuck, vanished
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +89,8 @@ SEARCH_FACES_PER_GOAL = 2  # turns to face unsearched wall feet at one reached s
 SEARCH_GOAL_KINDS = ("peek", "search", "look")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet
 SEARCH_FACE_KINDS = ("peek", "look")  # ...those reached only to look at something beside them: the rover turns to face it
 SEARCH_KEEP_MARGIN_M = 6.0  # a look or far-floor goal still open is kept unless another is this much cheaper (explore.search_cost), m
+VANISHED_REACH_M = 3.0  # a frontier goal voted wall before it was seen from close is still driven to: the floor cell nearest it within this, m
+SEARCH_COMMIT_M = 3.0  # a search goal still open is kept until the rover has driven this far from where it chose it (a turn away from an arm's tip revealed new wall feet there and the rover turned back, twice: seed 7), m
 SEARCH_GOALS_PER_FRAME = 3  # search goals one frame may tick off as reached (a goal under the rover's wheels) before it plans the next one
 SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
@@ -194,6 +196,7 @@ class NavMemory:
         self.plan_time = -math.inf
         self.frontier_ignored = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
         self.frontier_abandoned = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # ignored because given up, not reached
+        self.vanished = None  # (goal cell, stand cell): a frontier goal voted wall before it was seen from close, still driven to
         self.frontier_count = None  # reachable frontier clusters at the last explore plan
         self.explored = False
         self.no_frontier_plans = 0  # consecutive explore plans that found no frontier
@@ -210,6 +213,7 @@ class NavMemory:
         self.goal_best = math.inf
         self.goal_best_time = 0.0
         self.goal_since = 0.0  # when the current path goal was chosen, s
+        self.goal_from = None  # where the rover stood when it chose the current path goal, world (x, y)
         self.loops = explore.LoopDetector()
         self.visits = explore.VisitMap((grid.GRID_SIZE, grid.GRID_SIZE))
         self.seen_close = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # cells looked at from close
@@ -511,6 +515,7 @@ def _abandon_goal(nav, s):
 
 def _give_up_frontier(nav):
     """Ignore the current frontier goal, remembering it was given up (not reached): see hidden_frontiers."""
+    nav.vanished = None  # a given-up goal is not driven to again as a vanished one
     explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
     explore.ignore_disc(nav.frontier_abandoned, nav.path_goal[1])
 
@@ -1040,6 +1045,7 @@ def _set_path(nav, s, kind, goal, cells):
         _reset_goal_progress(nav, s)
         nav.loops.reset()
         nav.goal_since = s.t
+        nav.goal_from = s.pos
     nav.path_goal = (kind, goal) if goal is not None else None
     nav.path_xy = astar.cells_to_world(cells)
     nav.path_idx = 0
@@ -1081,6 +1087,12 @@ def _plan_explore(rover, nav, s):
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
     targets, cost, parent, dist = _frontier_targets(rover, nav, s, free, obstacle, mask)
     nav.frontier_count = len(targets)
+    stand = _vanished_frontier_stand(nav, s, free, obstacle, dist)
+    if stand is not None:
+        nav.no_frontier_plans = 0
+        nav.explored = False
+        _set_path(nav, s, "frontier", stand, astar.path_to(parent, cost.shape, stand))
+        return
     current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "frontier" else None
     committed = current is not None and s.t - nav.goal_since < FRONTIER_COMMIT_S
     goal = explore.choose_target(targets, s.pos, s.yaw, current,
@@ -1097,6 +1109,29 @@ def _plan_explore(rover, nav, s):
     nav.no_frontier_plans = 0
     nav.explored = False
     _set_path(nav, s, "frontier", goal, astar.path_to(parent, cost.shape, goal))
+
+
+def _vanished_frontier_stand(nav, s, free, obstacle, dist):
+    """The floor cell to keep driving to when the frontier goal was voted wall before the camera saw it
+    from close (see navigation.vanished), or None. Ends once that cell is reached or the goal seen close."""
+    cur = nav.path_goal
+    if nav.vanished is not None:
+        cell = nav.vanished[0]
+    elif cur is not None and cur[0] == "frontier" and cur[1] is not None:
+        cell = cur[1]
+    else:
+        return None
+    stand = None
+    if dist is not None and vanished.vanished_by_far_vote(cell, obstacle, _seen_for_frontiers(nav, s)):
+        stand = vanished.stand_beside(cell, free, dist, VANISHED_REACH_M)
+    if stand is not None:
+        sx, sy = grid.cell_to_world(*stand)
+        if math.hypot(sx - s.pos[0], sy - s.pos[1]) < FRONTIER_REACHED_M:
+            stand = None  # there: the camera looks at the goal from here
+    if stand is not None and nav.vanished is None:
+        log.info("frontier %s voted wall before it was seen from close: driving to %s to look", cell, stand)
+    nav.vanished = (cell, stand) if stand is not None else None
+    return stand
 
 
 def _plan_search(rover, nav, s, frame_maps=None):
@@ -1148,9 +1183,23 @@ def _keep_search_goal(nav, s, chosen, dist, free, unsearched):
             return chosen
     elif nav.search_done[r, c]:
         return chosen
+    if _search_goal_committed(nav, s):
+        return cur
     (cr, cc) = chosen[1]
     costs = explore.search_cost([r, cr], [c, cc], [dist[r, c], dist[cr, cc]], s.pos, s.yaw)
     return cur if costs[0] <= costs[1] + SEARCH_KEEP_MARGIN_M else chosen
+
+
+def _search_goal_committed(nav, s):
+    """True until the rover has driven SEARCH_COMMIT_M from where it chose its (still open) search goal.
+
+    Turning in place to leave an arm's tip, the camera swept the tip and mapped a little more floor
+    there; the wall feet beside that new floor, 4-5 m off, were not yet searched, their stand lay under
+    the rover and won, and the rover turned back (seed 7: twice in 25 s, then the spin detector fired).
+    Those wall feet stay open and are visited when they are the cheapest goal from somewhere else."""
+    if nav.goal_from is None:
+        return False
+    return math.hypot(s.pos[0] - nav.goal_from[0], s.pos[1] - nav.goal_from[1]) < SEARCH_COMMIT_M
 
 
 def _remember_unsearched(rover, nav, s, free, obstacle, frame_maps=None):
