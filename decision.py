@@ -188,6 +188,9 @@ class NavMemory:
         self.glance_hold_until = -math.inf  # a glance holds the rover still, facing the wall feet, until then, s
         self.glanced = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places a turn in place already glanced at unsearched wall feet
         self.unsearched = None  # unsearched wall feet (explore.unsearched_wall_feet) at the last plan with samples missing, or None
+        self.pockets_open = False  # exploration ran out of ordinary frontier with samples missing: faint pockets are looked into (logged once)
+        self.pocket_goal = None  # bool map of the faint pocket the current frontier goal drives into (explore.pocket_entries), or None
+        self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
         # planning
         self.path_xy = np.zeros((0, 2))
@@ -513,6 +516,13 @@ def _abandon_goal(nav, s):
     nav.plan_time = -math.inf
 
 
+def _pocket_done(nav):
+    """The faint pocket the current frontier goal drove into (if it was one) is done: reached or given up."""
+    if nav.pocket_goal is not None:
+        nav.pocket_reached |= nav.pocket_goal
+        explore.ignore_disc(nav.pocket_reached, nav.path_goal[1])
+
+
 def _give_up_frontier(nav):
     """Ignore the current frontier goal, remembering it was given up (not reached): see hidden_frontiers."""
     nav.vanished = None  # a given-up goal is not driven to again as a vanished one
@@ -534,7 +544,20 @@ def _check_stuck(nav, s):
         if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
             nav.blocked_at[r, c] = s.t
     _give_up_search_goal_near(nav, s)
+    _give_up_pocket_near(nav, s)
     return True
+
+
+def _give_up_pocket_near(nav, s):
+    """A faint pocket the rover got stuck driving into is done (_pocket_done): many are a shaded slope, not
+    a slot (seed 17, shadows on: 40 s of stuck on the slope at (64, 85) before the second sweep)."""
+    if nav.pocket_goal is None or nav.path_goal is None or nav.path_goal[0] != "frontier" or nav.path_goal[1] is None:
+        return
+    gx, gy = grid.cell_to_world(*nav.path_goal[1])
+    if math.hypot(gx - s.pos[0], gy - s.pos[1]) <= SEARCH_STUCK_GIVE_UP_M:
+        _pocket_done(nav)
+        nav.pocket_goal = None
+        nav.path_goal = None
 
 
 def _give_up_search_goal_near(nav, s):
@@ -667,10 +690,12 @@ def mode_forward(rover, nav, s):
     if nav.path_goal is not None and nav.path_goal[0] == "frontier" and len(nav.path_xy) >= 2:
         goal_xy = grid.cell_to_world(*nav.path_goal[1])
         if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M:
+            _pocket_done(nav)
             explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
             nav.plan_time = -math.inf
         if _goal_stalled(nav, s):
             log.info("frontier %s not getting closer: ignoring it", nav.path_goal[1])
+            _pocket_done(nav)
             _give_up_frontier(nav)
             nav.plan_time = -math.inf
         return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
@@ -1086,8 +1111,13 @@ def _plan_explore(rover, nav, s):
     _remember_unsearched(rover, nav, s, free, obstacle)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
     targets, cost, parent, dist = _frontier_targets(rover, nav, s, free, obstacle, mask)
+    was_pocket, nav.pocket_goal = nav.pocket_goal is not None, None
+    if not len(targets) and _samples_missing(s):
+        targets, cost, parent, dist = _pocket_targets(rover, nav, s, free, obstacle, (targets, cost, parent, dist))
     nav.frontier_count = len(targets)
-    stand = _vanished_frontier_stand(nav, s, free, obstacle, dist)
+    # a pocket goal is mapped wall on purpose: not a frontier that vanished under a far vote
+    stand = None if was_pocket or nav.pocket_goal is not None else _vanished_frontier_stand(nav, s, free, obstacle,
+                                                                                            dist)
     if stand is not None:
         nav.no_frontier_plans = 0
         nav.explored = False
@@ -1132,6 +1162,32 @@ def _vanished_frontier_stand(nav, s, free, obstacle, dist):
         log.info("frontier %s voted wall before it was seen from close: driving to %s to look", cell, stand)
     nav.vanished = (cell, stand) if stand is not None else None
     return stand
+
+
+def _pocket_targets(rover, nav, s, free, obstacle, none_left):
+    """Frontier targets inside faint pockets (explore.pocket_entries) once no ordinary frontier is left with
+    samples missing: drive in to look before calling the map complete. Only then, so exploration keeps its
+    order (every pocket a frontier from the start cost seed 0 290 s), and only that: counting pocket cells
+    as unsearched wall feet moved glances and gave the search more stands (seed 3 on +49 s, seed 51 on
+    +212 s). A pocket driven into (or given up) stays done through the second sweep, which only reopens
+    ordinary frontier. `none_left` (the empty _frontier_targets result) is returned when there is none."""
+    if not nav.pockets_open:
+        nav.pockets_open = True
+        log.info("no frontier left with samples missing at t=%.1f: looking into faint pockets", s.t)
+    pockets = explore.faint_pockets(free, obstacle, perception.sand_share(rover)) & ~nav.pocket_reached
+    unlooked = pockets & ~perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
+    if not unlooked.any():
+        return none_left
+    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
+        dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
+        targets, clusters = explore.pocket_entries(pockets, unlooked, free,
+                                                   perception.looked_at_within(rover, explore.PEEK_RANGE_M),
+                                                   nav.pocket_reached, dist)
+        if len(targets):
+            goal = explore.choose_target(targets, s.pos, s.yaw)
+            nav.pocket_goal = clusters == clusters[goal]
+            return targets[(targets[:, 0] == goal[0]) & (targets[:, 1] == goal[1])], cost, parent, dist
+    return none_left
 
 
 def _plan_search(rover, nav, s, frame_maps=None):

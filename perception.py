@@ -421,6 +421,21 @@ def looked_at_within(rover, range_m: float) -> np.ndarray:
     return get_memory(rover).look_range <= range_m
 
 
+def sand_share(rover) -> np.ndarray:
+    """float32 (200, 200) [y, x]: light plus shadowed sand (dark shadowed sand included) as a share of each
+    cell's votes, 0 for never-seen cells.
+
+    Sand in a deep cast shadow loses the vote to the wall around it, but a slot's floor still keeps
+    a tenth to a third of its votes as sand, where a wall two cells from the floor keeps almost none:
+    the sample search uses that faint evidence to look into pockets mapped as wall (seed 14, shadows on).
+    """
+    mem = get_memory(rover)
+    total = mem.nav_votes + mem.obs_votes
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(total > 0, _sand_votes(mem, 0, WORLD_SIZE, 0, WORLD_SIZE) / total, 0.0)
+    return share.astype(np.float32)
+
+
 def drive_map(rover) -> np.ndarray:
     """The map to plan on: like ``rover.worldmap`` but sand in shadow counts as obstacle, no rocks.
 

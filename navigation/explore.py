@@ -56,6 +56,11 @@ SIGHT_RAY_DEG = 2.0  # angle between lines of sight (0.14 m apart at 4 m, well u
 SIGHT_MIN_FORWARD_M = 0.6  # ground nearer than this (ahead of the rover) is hidden under the camera (perception.GRID_MIN_FORWARD_M), m
 LOOK_STAND_DONE_M = 1.5  # a reached look stand rules out stands this close; the wall feet it faced stay open if still unseen, m
 LOOK_TRIES = 2  # wall feet faced from this many look stands and still unseen are given up (a cell the camera cannot see never holds the search)
+FAINT_SAND_MIN_SHARE = 0.1  # a wall cell keeping at least this share of sand votes may be shadowed floor (a slot's floor keeps 0.1-0.3, solid wall ~0), 0..1
+FAINT_MIN_DEPTH_M = 2.0  # ...counted only in clusters reaching this far from mapped floor (every floor edge has a fuzzy 1-2 cell fringe), m
+FAINT_MIN_CELLS = 3  # ...of at least this many cells, cells
+FAINT_ENTER_DEPTH_M = 3.0  # exploration drives into pockets reaching this far from mapped floor (a shallower one is seen from its mouth), m
+FAINT_ENTER_MOUTH_CELLS = 10  # ...and opening onto the floor through at most this many cells (a slot; a wide faint band is a shaded wall face), cells
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
@@ -367,6 +372,54 @@ def look_targets(unsearched, free, visited, done, dist, stand_done=None):
         return np.zeros((0, 4))
     rows, cols, lab, d = rows[ok], cols[ok], lab[ok], d[ok]
     return _first_per_cluster(rows, cols, lab, d, stats, np.lexsort((d, lab)))
+
+
+def faint_pockets(free, obstacle, sand_share):
+    """bool map: wall cells that may be floor in deep shadow: mapped obstacle keeping at least
+    FAINT_SAND_MIN_SHARE of sand votes, in 8-connected clusters of FAINT_MIN_CELLS or more touching
+    mapped floor (through the wall feet) and reaching FAINT_MIN_DEPTH_M from it.
+
+    Shadowed floor is voted down to wall, so a slot's floor is wall on the map and its mouth's wall
+    feet count as searched while the sample lies 2-4 m deeper (seeds 14 and 17, shadows on: 5/6 at
+    850 s). Nothing else in the map tells such a slot from a wall."""
+    cand = obstacle & (sand_share >= FAINT_SAND_MIN_SHARE)
+    cand[0, :] = cand[-1, :] = cand[:, 0] = cand[:, -1] = False
+    if not cand.any():
+        return cand
+    depth = cv2.distanceTransform((~free).astype(np.uint8), cv2.DIST_L2, 3)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(cand.astype(np.uint8), connectivity=8)
+    lab = labels[cand]
+    deepest = np.zeros(n, np.float32)
+    np.maximum.at(deepest, lab, depth[cand])
+    nearest = np.full(n, np.inf, np.float32)
+    np.minimum.at(nearest, lab, depth[cand])
+    keep = (deepest >= FAINT_MIN_DEPTH_M) & (nearest <= 1.5) & (stats[:, cv2.CC_STAT_AREA] >= FAINT_MIN_CELLS)
+    keep[0] = False
+    return keep[labels] & cand
+
+
+def pocket_entries(pockets, unlooked, free, looked, done, dist):
+    """(targets, clusters): one (row, col, path_cost, size) per cluster of `pockets` (faint_pockets) that
+    still holds an `unlooked` cell, reaches FAINT_ENTER_DEPTH_M from mapped floor and opens onto it through
+    at most FAINT_ENTER_MOUTH_CELLS cells (a slot, not a faint band along a wall face): its deepest cell the
+    rover can reach no more than PEEK_MAX_DEPTH_M from mapped floor (peek_targets, minus `done`), and the
+    int32 label map of those clusters (0 elsewhere). Driving into every pocket on the map first (the west
+    arm's 48-cell faint band, the south tip) cost seed 0 (shadows on) the east-nook sample, in no pocket.
+
+    Exploration drives in there, once no ordinary frontier is left with samples missing. The floor at a
+    pocket's mouth was not enough: on seed 17 (shadows on) the mouth of the spur was looked at from 4 m
+    while exploring, which hid the deeper cells from the mouth rule, and the sample lies 7 m in."""
+    n, labels, _stats, _ = cv2.connectedComponentsWithStats(pockets.astype(np.uint8), connectivity=8)
+    depth = cv2.distanceTransform((~free).astype(np.uint8), cv2.DIST_L2, 3)
+    deepest = np.zeros(n, np.float32)
+    np.maximum.at(deepest, labels[pockets], depth[pockets])
+    mouth = np.bincount(labels[pockets & (depth < 1.5)], minlength=n)  # cells touching mapped floor
+    keep = np.zeros(n, bool)
+    keep[np.unique(labels[pockets & unlooked])] = True
+    keep &= (deepest >= FAINT_ENTER_DEPTH_M) & (mouth <= FAINT_ENTER_MOUTH_CELLS)
+    keep[0] = False
+    clusters = np.where(keep[labels], labels, 0).astype(np.int32)
+    return peek_targets(free, clusters > 0, looked, done, dist), clusters
 
 
 def _window(shape, pos, radius_m):

@@ -589,3 +589,53 @@ def test_with_samples_missing_an_arm_tip_seen_from_6_m_is_still_a_frontier():
     assert decision._seen_for_frontiers(r.nav, s) is r.nav.seen_near
     r.samples_remaining = 0
     assert decision._seen_for_frontiers(r.nav, decision._read_inputs(r)) is r.nav.seen_close
+
+
+def _rover_beside_a_faint_slot():
+    """make_rover's corridor with its east end closed (no frontier left) and a slot running south from
+    the south wall at x 108-110, mapped as wall but keeping 30 % of its votes as shadowed sand."""
+    import perception
+    r = make_rover(pos=(112.0, 85.0), yaw=180.0, t=300.0)
+    wall = np.ones((200, 200), bool)
+    wall[80:91, 90:130] = False
+    r.worldmap[60:100, 80:140, 0][wall[60:100, 80:140]] = 255  # thick walls all round
+    r.nav.seen_near[:] = True  # ...looked at from close
+    mem = perception.get_memory(r)
+    mem.obs_votes[70:80, 105:114] = 100.0
+    mem.shade_votes[71:80, 108:111] = 30.0  # from the wall feet (row 79) 9 m deep
+    return r
+
+
+def test_faint_pockets_are_driven_into_only_once_exploration_ran_out_of_frontier():
+    """Seed 3 (shadows on): pockets counted as unsearched from the start moved glances while exploring
+    and cost 49 s with all six found anyway; seeds 14 and 17 need them only once the map is done."""
+    r = _rover_beside_a_faint_slot()
+    free, obstacle, _unknown = decision._grids(r)
+    assert not decision._unsearched_wall_feet(r, r.nav, None, free, obstacle)[71:78, 108:111].any()
+    s = decision._read_inputs(r)
+    decision._plan_explore(r, r.nav, s)
+    assert r.nav.pockets_open and r.nav.pocket_goal is not None, "no frontier left: into the slot"
+    row, col = r.nav.path_goal[1]
+    assert 75 <= row <= 78 and 108 <= col <= 110, "up to 3.5 m into the slot"
+    r.nav.path_xy = np.array([(112.0, 85.0), (col + 0.5, row + 0.5)])
+    decision._pocket_done(r.nav)  # driven into; then the second sweep reopens ordinary frontier
+    r.nav.frontier_ignored[:] = False
+    decision._plan_explore(r, r.nav, s)
+    assert r.nav.path_goal is None and r.nav.pocket_goal is None, "a pocket driven into is not chased again"
+    r2 = _rover_beside_a_faint_slot()
+    r2.samples_remaining = 0
+    decision._plan_explore(r2, r2.nav, decision._read_inputs(r2))
+    assert r2.nav.path_goal is None and not r2.nav.pockets_open, "all six in: no pocket is worth a look"
+
+
+def test_a_faint_pocket_the_rover_got_stuck_in_is_done():
+    """Seed 17 (shadows on): the rover spent 40 s stuck on a shaded slope it took for a pocket."""
+    r = _rover_beside_a_faint_slot()
+    s = decision._read_inputs(r)
+    decision._plan_explore(r, r.nav, s)
+    row, col = r.nav.path_goal[1]
+    s.pos = (col + 0.5, row + 3.5)  # 3 m short of it, wedged
+    decision._give_up_pocket_near(r.nav, s)
+    assert r.nav.pocket_reached[row, col] and r.nav.path_goal is None
+    decision._plan_explore(r, r.nav, s)
+    assert r.nav.path_goal is None, "not chased again"

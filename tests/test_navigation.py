@@ -277,6 +277,58 @@ def test_peek_has_nothing_to_do_once_the_pocket_was_seen_or_searched():
     assert len(explore.peek_targets(free, shadow, looked, done, dist)) == 0
 
 
+def _faint_slot_scene():
+    """Floor y 95..105, x 40..80, wall elsewhere. A slot y 99..101 runs east from x 80 to 86 with a third of
+    its votes sand (floor in deep shadow, voted down); the wall cell beside the floor along the north edge
+    keeps a fuzzy 0.4, one further out 0.15 (an ordinary edge). Returns (free, obstacle, share)."""
+    free = np.zeros((200, 200), bool)
+    free[95:106, 40:80] = True
+    obstacle = ~free
+    share = np.zeros((200, 200), np.float32)
+    share[free] = 1.0
+    share[99:102, 80:86] = 0.3  # the slot
+    share[106, 40:80] = 0.4  # the fuzzy edge
+    share[107, 40:80] = 0.15
+    return free, obstacle, share
+
+
+def test_faint_pockets_finds_a_slot_of_weak_sand_but_not_a_fuzzy_edge():
+    free, obstacle, share = _faint_slot_scene()
+    pockets = explore.faint_pockets(free, obstacle, share)
+    assert pockets[99:102, 80:86].all(), "the slot reaches 6 m from the floor"
+    assert not pockets[106:108].any(), "an edge two cells deep is every wall's fringe"
+    share[99:102, 80:86] = 0.05  # solid wall keeps almost no sand votes
+    assert not explore.faint_pockets(free, obstacle, share).any()
+    free2, obstacle2, share2 = _faint_slot_scene()
+    share2[99:102, 80:82] = 0.0  # the weak sand does not touch the floor: not a slot opening onto it
+    assert not explore.faint_pockets(free2, obstacle2, share2)[99:102, 82:86].any()
+
+
+def test_pocket_entry_drives_into_a_slot_whose_mouth_was_seen_but_not_its_depth():
+    """Seed 17 (shadows on): the spur's mouth was looked at from 4 m while exploring; the sample lay 7 m in."""
+    free, obstacle, share = _faint_slot_scene()
+    pockets = explore.faint_pockets(free, obstacle, share)
+    dist, _ = astar.distance_field(grid.cost_grid(free, obstacle, soft_obstacles=True), (100, 50))
+    looked = np.zeros((200, 200), bool)
+    looked[:, :82] = True  # the mouth (x 80-81) seen from close, the rest not
+    done = np.zeros((200, 200), bool)
+    targets, clusters = explore.pocket_entries(pockets, pockets & ~looked, free, looked, done, dist)
+    assert len(targets) == 1
+    row, col = int(targets[0][0]), int(targets[0][1])
+    assert pockets[row, col] and 82 <= col <= 80 + explore.PEEK_MAX_DEPTH_M, "inside the slot, past the seen mouth"
+    assert clusters[row, col] > 0 and (clusters > 0).sum() == pockets.sum()
+    targets, _ = explore.pocket_entries(pockets, np.zeros((200, 200), bool), free, looked, done, dist)
+    assert len(targets) == 0, "every cell looked at: nothing to drive into"
+    done[pockets] = True
+    assert len(explore.pocket_entries(pockets, pockets, free, looked, done, dist)[0]) == 0
+    none_done = np.zeros((200, 200), bool)
+    shallow = pockets & (np.arange(200) < 83)[None, :]  # 3 m deep: seen from the floor beside it
+    assert len(explore.pocket_entries(shallow, shallow, free, looked, none_done, dist)[0]) == 0
+    band = np.zeros((200, 200), bool)
+    band[106:112, 40:80] = True  # a faint band 6 m deep along the whole north wall: a shaded wall face
+    assert len(explore.pocket_entries(band, band, free, looked, none_done, dist)[0]) == 0
+
+
 def test_search_goes_to_the_nearest_floor_far_enough_from_the_trail():
     free = np.zeros((200, 200), bool)
     free[90:111, 50:151] = True  # a 21 m wide strip
