@@ -322,7 +322,7 @@ def test_pocket_entry_drives_into_a_slot_whose_mouth_was_seen_but_not_its_depth(
     done[pockets] = True
     assert len(explore.pocket_entries(pockets, pockets, free, looked, done, dist)[0]) == 0
     none_done = np.zeros((200, 200), bool)
-    shallow = pockets & (np.arange(200) < 83)[None, :]  # 3 m deep: seen from the floor beside it
+    shallow = pockets & (np.arange(200) < 83)[None, :]  # 2.9 m deep: seen from the floor beside it
     assert len(explore.pocket_entries(shallow, shallow, free, looked, none_done, dist)[0]) == 0
     band = np.zeros((200, 200), bool)
     band[106:112, 40:80] = True  # a faint band 6 m deep along the whole north wall: a shaded wall face
