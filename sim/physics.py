@@ -267,7 +267,8 @@ class RoverPhysics:
             wheel_h = self._wheel_heights(x, y, yaw_deg)
         bp = C.BODY_POINTS
         z0, a, b = self._plane(wheel_h)
-        if FAST_CONTACTS and not self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1) and self._compiled_terrain():
+        near = self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1)
+        if FAST_CONTACTS and not near and self._compiled_terrain():
             # open ground (the common step): one compiled test that no body point is under the terrain
             yaw = math.radians(yaw_deg)
             w = self.world
@@ -294,7 +295,6 @@ class RoverPhysics:
             depths.append(o[ok] / np.maximum(g[ok], MIN_WALL_TAN))
             dxs.append(-gx[ok] / g[ok])
             dys.append(-gy[ok] / g[ok])
-        near = self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1)
         if near:
             rb, rt, rd, ex, ey = C.RockField.query(near, px, py)
             hit = (rt > bottom) & (rb < top) & (rd > 0)
