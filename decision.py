@@ -548,13 +548,19 @@ def _check_stuck(nav, s):
     return True
 
 
+def _goal_cell_near(nav, s, kinds, radius_m):
+    """The current path goal's cell when the goal is of one of `kinds`, has a cell and lies within radius_m
+    of the rover; else None (the give-up-where-stuck rules below)."""
+    if nav.path_goal is None or nav.path_goal[0] not in kinds or nav.path_goal[1] is None:
+        return None
+    gx, gy = grid.cell_to_world(*nav.path_goal[1])
+    return nav.path_goal[1] if math.hypot(gx - s.pos[0], gy - s.pos[1]) <= radius_m else None
+
+
 def _give_up_pocket_near(nav, s):
     """A faint pocket the rover got stuck driving into is done (_pocket_done): many are a shaded slope, not
     a slot (seed 17, shadows on: 40 s of stuck on the slope at (64, 85) before the second sweep)."""
-    if nav.pocket_goal is None or nav.path_goal is None or nav.path_goal[0] != "frontier" or nav.path_goal[1] is None:
-        return
-    gx, gy = grid.cell_to_world(*nav.path_goal[1])
-    if math.hypot(gx - s.pos[0], gy - s.pos[1]) <= SEARCH_STUCK_GIVE_UP_M:
+    if nav.pocket_goal is not None and _goal_cell_near(nav, s, ("frontier",), SEARCH_STUCK_GIVE_UP_M) is not None:
         _pocket_done(nav)
         nav.pocket_goal = None
         nav.path_goal = None
@@ -564,14 +570,12 @@ def _give_up_search_goal_near(nav, s):
     """A search or peek target beside the place the rover just got stuck is not worth another try:
     the floor far from the trail near the start is a field of small rocks (seed 23 got stuck there
     three times in 30 s going for one search target)."""
-    if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or nav.path_goal[1] is None:
+    goal = _goal_cell_near(nav, s, SEARCH_GOAL_KINDS, SEARCH_STUCK_GIVE_UP_M)
+    if goal is None:
         return
-    kind, goal = nav.path_goal
-    gx, gy = grid.cell_to_world(*goal)
-    if math.hypot(gx - s.pos[0], gy - s.pos[1]) <= SEARCH_STUCK_GIVE_UP_M:
-        radius = _search_done_radius(kind)
-        explore.ignore_disc(nav.look_done if kind == "look" else nav.search_done, goal, radius)
-        nav.path_goal = None
+    kind = nav.path_goal[0]
+    explore.ignore_disc(nav.look_done if kind == "look" else nav.search_done, goal, _search_done_radius(kind))
+    nav.path_goal = None
 
 
 def _check_turn_blocked(nav, s):
