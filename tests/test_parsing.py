@@ -233,6 +233,27 @@ def test_decoded_frames_equal_bgr_decode_plus_colour_conversion(test_dataset_dir
         assert np.array_equal(sf.decode_image(_b64(raw)), ref)
 
 
+def test_simplejpeg_decodes_plain_jpegs_to_the_pixels_opencv_gives(monkeypatch):
+    """The fast decoder is taken for plain JPEGs (4:2:0 and 4:4:4, several qualities) and gives OpenCV's pixels;
+    a truncated JPEG is None either way."""
+    simplejpeg = pytest.importorskip("simplejpeg")
+    calls = []
+    real = simplejpeg.decode_jpeg
+    monkeypatch.setattr(sf._simplejpeg, "decode_jpeg", lambda *a, **k: calls.append(1) or real(*a, **k))
+    rng = np.random.default_rng(3)
+    smooth = cv2.GaussianBlur(rng.integers(0, 255, (160, 320, 3), dtype=np.uint8), (9, 9), 3)
+    for img in (smooth, rng.integers(0, 255, (160, 320, 3), dtype=np.uint8)):
+        for quality, sampling in ((75, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420), (95, cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444)):
+            raw = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality,
+                                             cv2.IMWRITE_JPEG_SAMPLING_FACTOR, sampling])[1].tobytes()
+            fast = sf._decode_jpeg_bytes(raw)
+            monkeypatch.setattr(sf, "USE_SIMPLEJPEG", False)
+            assert np.array_equal(fast, sf._decode_jpeg_bytes(raw))
+            monkeypatch.setattr(sf, "USE_SIMPLEJPEG", True)
+    assert len(calls) == 4
+    assert sf._decode_jpeg_bytes(raw[: len(raw) // 2]) is None
+
+
 @pytest.mark.parametrize("b64", [None, "", "%%%", _b64(b"hello"), 7])
 def test_decode_image_garbage_is_none(b64):
     assert sf.decode_image(b64) is None
