@@ -49,7 +49,8 @@ recorded at a quality level with cast shadows and keeps the `--shadows on` look.
    royalejandro (held out). test_dataset's far floor is the other way round (real brighter, 1.03-1.23
    beyond 10 m): its quality level filters more sharply (round 3), and its whole view loses by this.
    Round 4 tried SHADOWLESS_SHADOW_FACTOR at megalphian's measured shadowed / sunlit ratio (0.97): +0.004
-   IoU within 5 m there, but the twin then maps 1.8 points more than the real frames (0.9: 1.4), so 0.9 stays.
+   IoU within 5 m there, but the twin then mapped 1.8 points more than the real frames (0.9: 1.4); 0.97 since
+   round 6 (item 7).
 6. Hue of the wall feet and of shaded floor (round 5, `floor_red_gain`): the real floor at sand weights 0.6-0.75 is
    redder than the colour table (green / red 0.006-0.013 and blue / red 0.007-0.014 lower on all four drives), and
    floor the terrain shades is redder still (about 0.7 % more red at full cast shadow: lit by the reddish sky alone).
@@ -57,6 +58,14 @@ recorded at a quality level with cast shadows and keeps the `--shadows on` look.
    stay as they were; what changes is the client's shadowed-sand colour test (green / red >= 0.90, blue / red >=
    0.83), which the twin's shaded wall feet passed 1.7-2x as often as the real ones, so the twin mapped 2-3 points
    more. Fitted on megalphian, dimaga and test_dataset, royalejandro held out (docs/twin-realism.md round 5).
+7. Wall feet without cast shadows (round 6, `shadowless_wall_foot_light`): at the same 2 m floor cells, sunlit, 1.5-6 m
+   away, the shadowless drive (megalphian) reads 0.89-0.90 of royalejandro's and dimaga's brightness at sand weights
+   0.70-0.77, 0.92-0.95 at 0.78-0.80 and 1.00 from 0.80 on (royalejandro / dimaga: flat, 1.05-1.06 at every weight),
+   so the quality levels without cast shadows draw the sand-rock blend darker, the open floor not. The colour table
+   was fitted at a quality level with cast shadows, so only the shadowless look darkens (10 % up to weight 0.775, none
+   from 0.80). With it, SHADOWLESS_SHADOW_FACTOR is megalphian's measured shadowed / sunlit ratio (0.97, as
+   `sim.realism --shadows auto` reports): round 4's 0.9 kept the map gap within 1.5 points, which the darker wall
+   feet now do (docs/twin-realism.md round 6).
 """
 from __future__ import annotations
 
@@ -68,7 +77,7 @@ from numba import njit
 
 SHADOWLESS_KNEE_M = 5.2  # the near floor's mild darkening stops growing here, m
 SHADOWLESS_NEAR_SHARE = 0.5  # share of the other quality levels' near-floor darkening kept, 0..1
-SHADOWLESS_SHADOW_FACTOR = 0.9  # brightness of the floor hidden from the sun without cast shadows, 0..1
+SHADOWLESS_SHADOW_FACTOR = 0.97  # brightness of the floor hidden from the sun without cast shadows (megalphian's shadowed / sunlit ratio), 0..1
 FAR_FALLOFF = 0.08  # extra darkening of everything far away (real far floor 8-16 m darker than the mipmaps alone), fraction
 FAR_FALLOFF_START_M = 8.0  # ... which starts at this viewing distance, m
 FAR_FALLOFF_SCALE_M = 4.0  # ... and grows to its full size over this e-folding distance, m
@@ -87,6 +96,9 @@ WALL_FOOT_RED_GAIN = 0.012  # extra red of the sand-rock blend at the wall feet 
 WALL_FOOT_RED_FULL_BELOW = 0.70  # ... in full at and below this sand weight, 0..1
 WALL_FOOT_RED_NONE_FROM = 0.80  # ... fading to none at this sand weight (open floor keeps the colour table's hue), 0..1
 SHADOW_RED_PER_DARKENING = 0.044  # extra red of floor the terrain shades, per unit of its darkening (full cast shadow 0.18: x1.008; item 6), fraction
+SHADOWLESS_WALL_FOOT_DARKEN = 0.10  # darkening of the wall-foot floor at the quality levels without cast shadows (item 7), fraction
+SHADOWLESS_WALL_FOOT_FULL_BELOW = 0.775  # ... in full at and below this sand weight, 0..1
+SHADOWLESS_WALL_FOOT_NONE_FROM = 0.80  # ... fading to none at this sand weight (open floor as before), 0..1
 
 
 def shadowless_darkening(dist_m) -> np.ndarray:
@@ -124,6 +136,15 @@ def floor_red_gain(sand: np.ndarray, darkening: np.ndarray) -> np.ndarray:
     ramp = np.clip((hi - np.asarray(sand, np.float32)) / (hi - lo), 0.0, 1.0)
     return ((1.0 + WALL_FOOT_RED_GAIN * ramp) * (1.0 + SHADOW_RED_PER_DARKENING * np.asarray(darkening, np.float32))
             ).astype(np.float32)
+
+
+def shadowless_wall_foot_light(sand: np.ndarray) -> np.ndarray:
+    """Brightness factor of the terrain colour at the quality levels without cast shadows (item 7): at the same
+    wall-foot floor cells the shadowless drive reads darker than the drives with cast shadows, whose look the
+    colour table was fitted on, while open sand reads the same."""
+    lo, hi = SHADOWLESS_WALL_FOOT_FULL_BELOW, SHADOWLESS_WALL_FOOT_NONE_FROM
+    ramp = np.clip((hi - np.asarray(sand, np.float32)) / (hi - lo), 0.0, 1.0)
+    return (1.0 - SHADOWLESS_WALL_FOOT_DARKEN * ramp).astype(np.float32)
 
 
 def splat_pyramid(sand_weight: np.ndarray) -> np.ndarray:

@@ -212,3 +212,37 @@ def test_floor_red_gain_leaves_the_starter_threshold_alone(shadows, monkeypatch)
         redder += int(np.count_nonzero(a[..., 0] > b[..., 0]))
         assert np.array_equal(np.all(a > 160, axis=2), np.all(b > 160, axis=2))
     assert redder > 1000  # the gain is exercised
+
+
+def test_shadowless_wall_foot_light_darkens_the_wall_foot_band_only():
+    """Item 7: x(1 - SHADOWLESS_WALL_FOOT_DARKEN) at and below weight 0.775, none from 0.80 (open floor unchanged)."""
+    sand = np.array([0.3, shading.SHADOWLESS_WALL_FOOT_FULL_BELOW, 0.79, shading.SHADOWLESS_WALL_FOOT_NONE_FROM, 1.0])
+    light = shading.shadowless_wall_foot_light(sand)
+    assert light[0] == light[1] == pytest.approx(1.0 - shading.SHADOWLESS_WALL_FOOT_DARKEN)
+    assert light[1] < light[2] < light[3] == light[4] == 1.0
+
+
+@pytest.mark.parametrize("shadows", [False, True])
+def test_wall_foot_darkening_is_in_the_shadowless_look_only(shadows, monkeypatch):
+    """Without cast shadows the baked terrain colour darkens at the wall feet and keeps the open floor; with cast
+    shadows (the quality level the colour table was fitted at) it is the same byte for byte."""
+    from dataclasses import replace
+
+    from sim.world import load_world
+
+    world = with_shadows(load_world("procedural:0"), shadows)
+    shipped = Renderer(replace(world)).baked
+    monkeypatch.setattr(shading, "SHADOWLESS_WALL_FOOT_DARKEN", 0.0)
+    plain = Renderer(replace(world)).baked
+    a, b = shipped["colour"].astype(int), plain["colour"].astype(int)
+    if shadows:
+        assert np.array_equal(a, b)
+        return
+    sand = shipped["sand"]
+    foot = sand <= shading.SHADOWLESS_WALL_FOOT_FULL_BELOW
+    open_floor = sand >= shading.SHADOWLESS_WALL_FOOT_NONE_FROM
+    assert foot.sum() > 1000 and open_floor.sum() > 1000
+    assert np.array_equal(a[open_floor], b[open_floor])
+    bright = foot & (b.min(axis=-1) >= 100)  # bright enough that rounding cannot hide the darkening
+    assert bright.sum() > 100
+    assert np.all(a[bright] < b[bright])
