@@ -145,6 +145,8 @@ class RoverTwin:
         self.jpeg_quality = int(jpeg_quality)
         self.sim_time_field = bool(sim_time_field)  # add the twin-only clock (lockstep debugging only)
         self._blank_jpeg_b64 = None
+        self._sample_key = None  # the sample positions the cached samples_x/_y strings were built from
+        self._sample_text = {}
         self.last_rgb = None  # last rendered camera frame (RGB) or None
         self.last_jpeg = None  # its JPEG bytes
         self.reset(seed)
@@ -281,14 +283,22 @@ class RoverTwin:
             "near_sample": "1" if near else "0",
             "picking_up": "1" if picking else "0",
             "sample_count": str(len(self.samples)),
-            "samples_x": ";".join(format_n(smp.x, 2) for smp in self.samples),
-            "samples_y": ";".join(format_n(smp.y, 2) for smp in self.samples),
+            **self._sample_fields(),
             "image": self._image_b64(),
         }
         if self.sim_time_field:
             out["sim_time"] = f"{self.sim_time:.{SIM_TIME_DECIMALS}f}"
         self.arm.end_of_frame()
         return out
+
+    def _sample_fields(self) -> dict:
+        """samples_x / samples_y; rebuilt only when the samples changed (a pickup), not every frame."""
+        key = tuple((smp.x, smp.y) for smp in self.samples)
+        if key != self._sample_key:
+            self._sample_key = key
+            self._sample_text = {"samples_x": ";".join(format_n(x, 2) for x, _ in key),
+                                 "samples_y": ";".join(format_n(y, 2) for _, y in key)}
+        return self._sample_text
 
     @property
     def truth(self) -> TwinTruth:

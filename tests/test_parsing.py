@@ -254,6 +254,19 @@ def test_simplejpeg_decodes_plain_jpegs_to_the_pixels_opencv_gives(monkeypatch):
     assert sf._decode_jpeg_bytes(raw[: len(raw) // 2]) is None
 
 
+def test_repeated_sample_strings_parse_to_fresh_equal_arrays_and_bad_ones_warn_each_time():
+    data = {"samples_x": "97.44;104.56", "samples_y": "74.65;80.78"}
+    first = sf._parse_samples(data, [])
+    first[0, 0] = -1.0  # a caller scribbling on its array must not change the next frame's
+    again = sf._parse_samples(dict(data), [])
+    assert again.tolist() == [[97.44, 74.65], [104.56, 80.78]]
+    assert sf._parse_samples({"samples_x": "97.44", "samples_y": "74.65"}, []).tolist() == [[97.44, 74.65]]
+    for _ in range(2):
+        warnings = []
+        assert sf._parse_samples({"samples_x": "1;x", "samples_y": "2;3"}, warnings).shape == (0, 2)
+        assert warnings
+
+
 @pytest.mark.parametrize("b64", [None, "", "%%%", _b64(b"hello"), 7])
 def test_decode_image_garbage_is_none(b64):
     assert sf.decode_image(b64) is None
