@@ -92,6 +92,7 @@ SEARCH_KEEP_MARGIN_M = 6.0  # a look or far-floor goal still open is kept unless
 VANISHED_REACH_M = 3.0  # a frontier goal voted wall before it was seen from close is still driven to: the floor cell nearest it within this, m
 SEARCH_COMMIT_M = 3.0  # a search goal still open is kept until the rover has driven this far from where it chose it (a turn away from an arm's tip revealed new wall feet there and the rover turned back, twice: seed 7), m
 SEARCH_GOALS_PER_FRAME = 3  # search goals one frame may tick off as reached (a goal under the rover's wheels) before it plans the next one
+POCKET_TOUR_S = 120.0  # exploration looks into faint pockets (nearest first) for at most this long after it first ran out of frontier with samples missing, then leaves the rest to the sample search (a sample in no pocket waited for every pocket's tour); two or three cross-canyon drives, s
 SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
 EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
@@ -189,6 +190,7 @@ class NavMemory:
         self.glanced = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places a turn in place already glanced at unsearched wall feet
         self.unsearched = None  # unsearched wall feet (explore.unsearched_wall_feet) at the last plan with samples missing, or None
         self.pockets_open = False  # exploration ran out of ordinary frontier with samples missing: faint pockets are looked into (logged once)
+        self.pocket_tour_end = math.inf  # ...until then (POCKET_TOUR_S after pockets_open), s
         self.pocket_goal = None  # bool map of the faint pocket the current frontier goal drives into (explore.pocket_entries), or None
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
@@ -1174,10 +1176,15 @@ def _pocket_targets(rover, nav, s, free, obstacle, none_left):
     order (every pocket a frontier from the start cost seed 0 290 s), and only that: counting pocket cells
     as unsearched wall feet moved glances and gave the search more stands (seed 3 on +49 s, seed 51 on
     +212 s). A pocket driven into (or given up) stays done through the second sweep, which only reopens
-    ordinary frontier. `none_left` (the empty _frontier_targets result) is returned when there is none."""
+    ordinary frontier, and the tour ends POCKET_TOUR_S after it began (a missing sample in no pocket waited
+    for the whole tour before the search). `none_left` (the empty _frontier_targets result) is returned when
+    there is none."""
     if not nav.pockets_open:
         nav.pockets_open = True
+        nav.pocket_tour_end = s.t + POCKET_TOUR_S
         log.info("no frontier left with samples missing at t=%.1f: looking into faint pockets", s.t)
+    if s.t > nav.pocket_tour_end:
+        return none_left
     pockets = explore.faint_pockets(free, obstacle, perception.sand_share(rover)) & ~nav.pocket_reached
     unlooked = pockets & ~perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
     if not unlooked.any():

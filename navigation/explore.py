@@ -59,8 +59,9 @@ LOOK_TRIES = 2  # wall feet faced from this many look stands and still unseen ar
 FAINT_SAND_MIN_SHARE = 0.1  # a wall cell keeping at least this share of sand votes may be shadowed floor (a slot's floor keeps 0.1-0.3, solid wall ~0), 0..1
 FAINT_MIN_DEPTH_M = 2.0  # ...counted only in clusters reaching this far from mapped floor (every floor edge has a fuzzy 1-2 cell fringe), m
 FAINT_MIN_CELLS = 3  # ...of at least this many cells, cells
-FAINT_ENTER_DEPTH_M = 3.0  # exploration drives into pockets reaching this far from mapped floor (a shallower one is seen from its mouth), m
-FAINT_ENTER_MOUTH_CELLS = 10  # ...and opening onto the floor through at most this many cells (a slot; a wide faint band is a shaded wall face), cells
+FAINT_ENTER_REACH_M = PEEK_RANGE_M  # exploration drives into pockets reaching this far past the floor they open onto (the camera shows the smallest sample from about this far, so a shallower pocket's end shows from its floor), m
+FAINT_ENTER_WIDTH_M = 5.0  # ...and at most this wide across, past the floor's fuzzy edge (the narrow places that hold sample points are 2.5-4 m of height-0 floor across, plus a cell of map fuzz; wider is a shaded wall face or slope), m
+FAINT_EDGE_M = 1.5  # pocket cells this close to the floor they open onto are its fuzzy edge, left out of the width (a cell and its diagonal neighbour), m
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
@@ -398,25 +399,64 @@ def faint_pockets(free, obstacle, sand_share):
     return keep[labels] & cand
 
 
+def pocket_shapes(labels, n, free):
+    """(reach_m, width_m): float arrays indexed by label 0..n-1 of the pocket clusters in `labels` (int map,
+    0 = none). Reach: how far the cluster's farthest cell lies from the floor it opens onto (the `free`
+    cells beside it), cell centre to cell centre. Width: the cluster's extent across the direction it
+    runs from that floor (opening floor's centre to the centre of its cells past FAINT_EDGE_M), counting
+    only those cells past the fuzzy edge, plus one cell.
+
+    A cell count along the floor called seed 17's spur (3 m across, its faint end wrapped along both side
+    walls) 11 cells wide, and a 3-cell chamfer distance called its 3 m reach 2.87 m (seed 17 off: 5/6)."""
+    reach = np.zeros(n)
+    width = np.zeros(n)
+    pocket = labels > 0
+    if n <= 1 or not pocket.any():
+        return reach, width
+    beside = cv2.dilate(labels.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int64)
+    opening = free & (beside > 0)  # a floor cell beside two clusters counts for the higher label only
+    if not opening.any():
+        return reach, width
+    away = cv2.distanceTransform((~opening).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    rows, cols = np.nonzero(pocket)
+    lab, far = labels[rows, cols], away[rows, cols]
+    np.maximum.at(reach, lab, far)
+    orows, ocols = np.nonzero(opening)
+    olab = beside[orows, ocols]
+    on = np.maximum(np.bincount(olab, minlength=n), 1)
+    deep = far >= FAINT_EDGE_M
+    dlab, drows, dcols = lab[deep], rows[deep], cols[deep]
+    dn = np.bincount(dlab, minlength=n)
+    run_y = np.bincount(dlab, drows, minlength=n) / np.maximum(dn, 1) - np.bincount(olab, orows, minlength=n) / on
+    run_x = np.bincount(dlab, dcols, minlength=n) / np.maximum(dn, 1) - np.bincount(olab, ocols, minlength=n) / on
+    norm = np.hypot(run_x, run_y)
+    norm[norm == 0] = 1.0
+    across = (drows * run_x[dlab] - dcols * run_y[dlab]) / norm[dlab]  # position across the run direction
+    lo = np.full(n, np.inf)
+    hi = np.full(n, -np.inf)
+    np.minimum.at(lo, dlab, across)
+    np.maximum.at(hi, dlab, across)
+    width[dn > 0] = hi[dn > 0] - lo[dn > 0] + 1.0
+    return reach, width
+
+
 def pocket_entries(pockets, unlooked, free, looked, done, dist):
     """(targets, clusters): one (row, col, path_cost, size) per cluster of `pockets` (faint_pockets) that
-    still holds an `unlooked` cell, reaches FAINT_ENTER_DEPTH_M from mapped floor and opens onto it through
-    at most FAINT_ENTER_MOUTH_CELLS cells (a slot, not a faint band along a wall face): its deepest cell the
-    rover can reach no more than PEEK_MAX_DEPTH_M from mapped floor (peek_targets, minus `done`), and the
-    int32 label map of those clusters (0 elsewhere). Driving into every pocket on the map first (the west
-    arm's 48-cell faint band, the south tip) cost seed 0 (shadows on) the east-nook sample, in no pocket.
+    still holds an `unlooked` cell, reaches FAINT_ENTER_REACH_M past the floor it opens onto and is at most
+    FAINT_ENTER_WIDTH_M wide across (pocket_shapes: a nook, not a faint band along a shaded wall face or
+    slope): its deepest cell the rover can reach no more than PEEK_MAX_DEPTH_M from mapped floor
+    (peek_targets, minus `done`), and the int32 label map of those clusters (0 elsewhere). Driving into
+    every pocket on the map first (the west arm's 48-cell faint band, the south tip) cost seed 0 (shadows
+    on) the east-nook sample, in no pocket.
 
     Exploration drives in there, once no ordinary frontier is left with samples missing. The floor at a
     pocket's mouth was not enough: on seed 17 (shadows on) the mouth of the spur was looked at from 4 m
     while exploring, which hid the deeper cells from the mouth rule, and the sample lies 7 m in."""
     n, labels, _stats, _ = cv2.connectedComponentsWithStats(pockets.astype(np.uint8), connectivity=8)
-    depth = cv2.distanceTransform((~free).astype(np.uint8), cv2.DIST_L2, 3)
-    deepest = np.zeros(n, np.float32)
-    np.maximum.at(deepest, labels[pockets], depth[pockets])
-    mouth = np.bincount(labels[pockets & (depth < 1.5)], minlength=n)  # cells touching mapped floor
+    reach, width = pocket_shapes(labels, n, free)
     keep = np.zeros(n, bool)
     keep[np.unique(labels[pockets & unlooked])] = True
-    keep &= (deepest >= FAINT_ENTER_DEPTH_M) & (mouth <= FAINT_ENTER_MOUTH_CELLS)
+    keep &= (reach >= FAINT_ENTER_REACH_M) & (width <= FAINT_ENTER_WIDTH_M)
     keep[0] = False
     clusters = np.where(keep[labels], labels, 0).astype(np.int32)
     return peek_targets(free, clusters > 0, looked, done, dist), clusters

@@ -628,6 +628,22 @@ def test_faint_pockets_are_driven_into_only_once_exploration_ran_out_of_frontier
     assert r2.nav.path_goal is None and not r2.nav.pockets_open, "all six in: no pocket is worth a look"
 
 
+def test_the_faint_pocket_tour_ends_after_its_time_budget():
+    """A sample in no pocket waited for the whole tour: after POCKET_TOUR_S the search takes over."""
+    r = _rover_beside_a_faint_slot()
+    s = decision._read_inputs(r)
+    r.nav.pockets_open, r.nav.pocket_tour_end = True, s.t + 1.0  # the tour began POCKET_TOUR_S - 1 s ago
+    decision._plan_explore(r, r.nav, s)
+    assert r.nav.pocket_goal is not None, "still within the budget: into the slot"
+    s.t = r.nav.pocket_tour_end + 0.5
+    decision._plan_explore(r, r.nav, s)
+    assert r.nav.path_goal is None and r.nav.pocket_goal is None, "budget spent: no pocket chased"
+    r2 = _rover_beside_a_faint_slot()
+    s2 = decision._read_inputs(r2)
+    decision._plan_explore(r2, r2.nav, s2)
+    assert r2.nav.pocket_tour_end == pytest.approx(s2.t + decision.POCKET_TOUR_S), "the budget starts with the tour"
+
+
 def test_a_faint_pocket_the_rover_got_stuck_in_is_done():
     """Seed 17 (shadows on): the rover spent 40 s stuck on a shaded slope it took for a pocket."""
     r = _rover_beside_a_faint_slot()

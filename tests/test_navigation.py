@@ -1,7 +1,9 @@
 """Planning helpers on synthetic maps: grids, A*, pure pursuit, reactive profile, frontiers, stuck."""
 import math
 
+import cv2
 import numpy as np
+import pytest
 
 from navigation import astar, explore, grid, pursuit, reactive, stuck
 
@@ -322,11 +324,71 @@ def test_pocket_entry_drives_into_a_slot_whose_mouth_was_seen_but_not_its_depth(
     done[pockets] = True
     assert len(explore.pocket_entries(pockets, pockets, free, looked, done, dist)[0]) == 0
     none_done = np.zeros((200, 200), bool)
-    shallow = pockets & (np.arange(200) < 83)[None, :]  # 2.9 m deep: seen from the floor beside it
+    shallow = pockets & (np.arange(200) < 82)[None, :]  # 2 m past the floor: seen from the floor beside it
     assert len(explore.pocket_entries(shallow, shallow, free, looked, none_done, dist)[0]) == 0
     band = np.zeros((200, 200), bool)
     band[106:112, 40:80] = True  # a faint band 6 m deep along the whole north wall: a shaded wall face
     assert len(explore.pocket_entries(band, band, free, looked, none_done, dist)[0]) == 0
+
+
+def _shapes(pocket, free):
+    n, labels, _stats, _ = cv2.connectedComponentsWithStats(pocket.astype(np.uint8), connectivity=8)
+    reach, width = explore.pocket_shapes(labels, n, free)
+    return reach[1:], width[1:]
+
+
+def _spur_scene():
+    """A 3 m wide corridor (y 99..101) ending at x 79; its faint end runs on to x 84 and the faint wall
+    fringe wraps along both side walls (y 98 and 102, x 72..80), as at seed 17's spur. (free, pocket)."""
+    free = np.zeros((200, 200), bool)
+    free[99:102, 40:80] = True
+    pocket = np.zeros((200, 200), bool)
+    pocket[99:102, 80:85] = True
+    pocket[[98, 102], 72:81] = True
+    return free, pocket
+
+
+def test_pocket_shape_measures_a_spur_across_not_along_its_wrapped_fringe():
+    free, pocket = _spur_scene()
+    reach, width = _shapes(pocket, free)
+    assert reach[0] == pytest.approx(5.0, abs=0.01), "x 84 is 5 cells past the last floor cell (x 79)"
+    assert width[0] == pytest.approx(3.0), "3 cells across; the old count along the floor called it 26"
+    assert reach[0] >= explore.FAINT_ENTER_REACH_M and width[0] <= explore.FAINT_ENTER_WIDTH_M
+    short = pocket & (np.arange(200) < 82)[None, :]  # its end 2 cells past the floor
+    assert _shapes(short, free)[0][0] == pytest.approx(2.0, abs=0.01)
+
+
+def test_pocket_shape_reach_counts_only_the_floor_the_pocket_opens_onto():
+    free, pocket = _spur_scene()
+    free[104:110, 80:90] = True  # another corridor behind the spur's south wall, not touching the pocket
+    reach, _width = _shapes(pocket, free)
+    assert reach[0] == pytest.approx(5.0, abs=0.01)
+
+
+def test_pocket_shape_calls_a_faint_band_along_a_wall_face_wide():
+    free = np.zeros((200, 200), bool)
+    free[90:106, 40:80] = True
+    band = np.zeros((200, 200), bool)
+    band[106:110, 50:70] = True  # 4 m deep along 20 m of the north wall
+    reach, width = _shapes(band, free)
+    assert reach[0] == pytest.approx(4.0, abs=0.01)
+    assert width[0] == pytest.approx(20.0, abs=0.5) and width[0] > explore.FAINT_ENTER_WIDTH_M
+
+
+def test_pocket_shape_measures_a_diagonal_slot_across_its_run():
+    free = np.zeros((200, 200), bool)
+    free[90:106, 40:80] = True
+    slot = np.zeros((200, 200), bool)
+    for k in range(8):  # a slot 2 cells thick running north-east from the corridor's corner
+        slot[106 + k, 80 + k:82 + k] = True
+    reach, width = _shapes(slot, free)
+    assert reach[0] > 7.0
+    assert width[0] <= 3.0, "about 1.4 m across the run (+ one cell), not its 8 m length"
+
+
+def test_pocket_shape_of_nothing_is_empty():
+    reach, width = explore.pocket_shapes(np.zeros((200, 200), np.int32), 1, np.ones((200, 200), bool))
+    assert reach.shape == (1,) and width.shape == (1,) and not reach.any() and not width.any()
 
 
 def test_search_goes_to_the_nearest_floor_far_enough_from_the_trail():
