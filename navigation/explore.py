@@ -60,8 +60,8 @@ FAINT_SAND_MIN_SHARE = 0.1  # a wall cell keeping at least this share of sand vo
 FAINT_MIN_DEPTH_M = 2.0  # ...counted only in clusters reaching this far from mapped floor (every floor edge has a fuzzy 1-2 cell fringe), m
 FAINT_MIN_CELLS = 3  # ...of at least this many cells, cells
 FAINT_ENTER_REACH_M = PEEK_RANGE_M  # exploration drives into pockets reaching this far past the floor they open onto (the camera shows the smallest sample from about this far, so a shallower pocket's end shows from its floor), m
-FAINT_ENTER_WIDTH_M = 5.0  # ...and at most this wide across, past the floor's fuzzy edge (the narrow places that hold sample points are 2.5-4 m of height-0 floor across, plus a cell of map fuzz; wider is a shaded wall face or slope), m
-FAINT_EDGE_M = 1.5  # pocket cells this close to the floor they open onto are its fuzzy edge, left out of the width (a cell and its diagonal neighbour), m
+FAINT_ENTER_WIDTH_M = 5.0  # ...and at most this wide across the way it runs (the narrow places that hold sample points are 2.5-4 m of height-0 floor across, plus a cell of map fuzz; wider is a shaded wall face or slope), m
+FAINT_EDGE_M = 1.5  # pocket cells this close to the floor they open onto are its fuzzy edge, left out of the run direction (a cell and its diagonal neighbour), m
 REVISIT_AGE_S = 60.0  # a cell last visited longer ago than this counts as a revisit, s
 
 
@@ -402,11 +402,10 @@ def faint_pockets(free, obstacle, sand_share):
 def pocket_shapes(labels, n, free):
     """(reach_m, width_m): float arrays indexed by label 0..n-1 of the pocket clusters in `labels` (int map,
     0 = none). Reach: how far the cluster's farthest cell lies from the floor it opens onto (the `free`
-    cells beside it), cell centre to cell centre. Width: the cluster's extent across the direction it
-    runs from that floor (opening floor's centre to the centre of its cells past FAINT_EDGE_M), counting
-    only those cells past the fuzzy edge, plus one cell.
+    cells beside it), cell centre to cell centre. Width: the cluster's extent across the direction it runs
+    (from the opening floor's centre to the centre of its cells past FAINT_EDGE_M), plus one cell.
 
-    A cell count along the floor called seed 17's spur (3 m across, its faint end wrapped along both side
+    A cell count along the floor called seed 17's spur (3 m across, its faint end wrapped along the side
     walls) 11 cells wide, and a 3-cell chamfer distance called its 3 m reach 2.87 m (seed 17 off: 5/6)."""
     reach = np.zeros(n)
     width = np.zeros(n)
@@ -425,17 +424,16 @@ def pocket_shapes(labels, n, free):
     olab = beside[orows, ocols]
     on = np.maximum(np.bincount(olab, minlength=n), 1)
     deep = far >= FAINT_EDGE_M
-    dlab, drows, dcols = lab[deep], rows[deep], cols[deep]
-    dn = np.bincount(dlab, minlength=n)
-    run_y = np.bincount(dlab, drows, minlength=n) / np.maximum(dn, 1) - np.bincount(olab, orows, minlength=n) / on
-    run_x = np.bincount(dlab, dcols, minlength=n) / np.maximum(dn, 1) - np.bincount(olab, ocols, minlength=n) / on
+    dn = np.bincount(lab[deep], minlength=n)
+    run_y = np.bincount(lab[deep], rows[deep], minlength=n) / np.maximum(dn, 1) - np.bincount(olab, orows, minlength=n) / on
+    run_x = np.bincount(lab[deep], cols[deep], minlength=n) / np.maximum(dn, 1) - np.bincount(olab, ocols, minlength=n) / on
     norm = np.hypot(run_x, run_y)
     norm[norm == 0] = 1.0
-    across = (drows * run_x[dlab] - dcols * run_y[dlab]) / norm[dlab]  # position across the run direction
+    across = (rows * run_x[lab] - cols * run_y[lab]) / norm[lab]  # position across the run direction
     lo = np.full(n, np.inf)
     hi = np.full(n, -np.inf)
-    np.minimum.at(lo, dlab, across)
-    np.maximum.at(hi, dlab, across)
+    np.minimum.at(lo, lab, across)
+    np.maximum.at(hi, lab, across)
     width[dn > 0] = hi[dn > 0] - lo[dn > 0] + 1.0
     return reach, width
 
