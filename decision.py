@@ -36,7 +36,7 @@ from typing import Optional
 import numpy as np
 
 import perception
-from navigation import approach, astar, explore, grid, predict, pursuit, reactive, rockmem, stuck, vanished
+from navigation import approach, astar, explore, grid, paths, predict, pursuit, reactive, rockmem, stuck, vanished
 
 log = logging.getLogger(__name__)
 
@@ -78,12 +78,7 @@ WALL_BIAS_STD = 0.6  # fallback wall hugging: steer to mean + this x std of nav 
 FALLBACK_MIN_NAV_PIXELS = 50  # fallback needs this many nav pixels to drive, pixels
 
 # --- planning ----------------------------------------------------------------------------
-REPLAN_S = 1.5  # replan the path at least this often, s
-OFF_PATH_M = 2.5  # replan when the rover is further than this from its path, m
-GOAL_PROGRESS_S = 12.0  # a goal whose path length did not shrink for this long is given up, s
-GOAL_PROGRESS_M = 1.0  # ...by at least this much, m
 FRONTIER_REACHED_M = 1.5  # a frontier target this close is reached (and ignored if still frontier), m
-OWN_CELLS_RADIUS = 1  # cells around the rover's own cell always treated as drivable, cells
 FRONTIER_COMMIT_S = 10.0  # a frontier target chosen this recently is kept while it is still frontier (no flip-flop while turning toward it), s
 SEARCH_FACES_PER_GOAL = 2  # turns to face unsearched wall feet at one reached search goal, at most
 SEARCH_GOAL_KINDS = ("peek", "search", "look")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet
@@ -96,7 +91,6 @@ POCKET_TOUR_S = 120.0  # exploration looks into faint pockets (nearest first) fo
 SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
 EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
-BLOCKED_MEMORY_S = 600.0  # cells the rover got stuck on stay blocked this long (the hub near the start is crossed again and again), s
 PATH_END_SLOW_M = 3.0  # slow down over the last metres of a path to a sample or home, m
 
 # --- samples -----------------------------------------------------------------------------
@@ -441,7 +435,7 @@ def _select_and_run(rover, nav, s):
     if s.pos is None:
         return "stop", Command(0.0, BRAKE_STOP if abs(s.vel) > STOPPED_SPEED_MPS else 0.0, 0.0)
     if nav.mode in ("sample", "pickup", "stuck"):
-        _reset_goal_progress(nav, s)  # time spent on a rock or a recovery is no stall of the frontier goal
+        paths.reset_goal_progress(nav, s)  # time spent on a rock or a recovery is no stall of the frontier goal
     if s.picking_up or s.near_sample:
         nav.recovery = None
         nav.rotate_heading = nav.rotate_via = None
@@ -550,19 +544,10 @@ def _check_stuck(nav, s):
     return True
 
 
-def _goal_cell_near(nav, s, kinds, radius_m):
-    """The current path goal's cell when the goal is of one of `kinds`, has a cell and lies within radius_m
-    of the rover; else None (the give-up-where-stuck rules below)."""
-    if nav.path_goal is None or nav.path_goal[0] not in kinds or nav.path_goal[1] is None:
-        return None
-    gx, gy = grid.cell_to_world(*nav.path_goal[1])
-    return nav.path_goal[1] if math.hypot(gx - s.pos[0], gy - s.pos[1]) <= radius_m else None
-
-
 def _give_up_pocket_near(nav, s):
     """A faint pocket the rover got stuck driving into is done (_pocket_done): many are a shaded slope, not
     a slot (seed 17, shadows on: 40 s of stuck on the slope at (64, 85) before the second sweep)."""
-    if nav.pocket_goal is not None and _goal_cell_near(nav, s, ("frontier",), SEARCH_STUCK_GIVE_UP_M) is not None:
+    if nav.pocket_goal is not None and paths.goal_cell_near(nav, s, ("frontier",), SEARCH_STUCK_GIVE_UP_M) is not None:
         _pocket_done(nav)
         nav.pocket_goal = None
         nav.path_goal = None
@@ -572,7 +557,7 @@ def _give_up_search_goal_near(nav, s):
     """A search or peek target beside the place the rover just got stuck is not worth another try:
     the floor far from the trail near the start is a field of small rocks (seed 23 got stuck there
     three times in 30 s going for one search target)."""
-    goal = _goal_cell_near(nav, s, SEARCH_GOAL_KINDS, SEARCH_STUCK_GIVE_UP_M)
+    goal = paths.goal_cell_near(nav, s, SEARCH_GOAL_KINDS, SEARCH_STUCK_GIVE_UP_M)
     if goal is None:
         return
     kind = nav.path_goal[0]
@@ -691,7 +676,7 @@ def mode_done(nav, s):
 
 def mode_forward(rover, nav, s):
     """Explore: follow a path to the best frontier; without a plan, hug the left wall."""
-    if nav.path_goal is None or nav.path_goal[0] != "frontier" or _needs_replan(nav, s):
+    if nav.path_goal is None or nav.path_goal[0] != "frontier" or paths.needs_replan(nav, s):
         _plan_explore(rover, nav, s)
     if nav.path_goal is not None and nav.path_goal[0] == "frontier" and len(nav.path_xy) >= 2:
         goal_xy = grid.cell_to_world(*nav.path_goal[1])
@@ -699,7 +684,7 @@ def mode_forward(rover, nav, s):
             _pocket_done(nav)
             explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
             nav.plan_time = -math.inf
-        if _goal_stalled(nav, s):
+        if paths.goal_stalled(nav, s):
             log.info("frontier %s not getting closer: ignoring it", nav.path_goal[1])
             _pocket_done(nav)
             _give_up_frontier(nav)
@@ -713,13 +698,13 @@ def mode_search(rover, nav, s):
     the trail, nearest first; None when nothing is left."""
     frame_maps = {}  # maps this frame's replan and face turn share (see _unsearched_wall_feet)
     for _goal in range(SEARCH_GOALS_PER_FRAME):
-        if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or _needs_replan(nav, s):
+        if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or paths.needs_replan(nav, s):
             _plan_search(rover, nav, s, frame_maps)
         if not nav.search_left or nav.path_goal is None:
             return None
         kind, goal = nav.path_goal
         goal_xy = grid.cell_to_world(*goal)
-        reached = (len(nav.path_xy) < 2 or _goal_stalled(nav, s)
+        reached = (len(nav.path_xy) < 2 or paths.goal_stalled(nav, s)
                    or math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < FRONTIER_REACHED_M)
         if not reached:
             return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
@@ -739,7 +724,7 @@ def _leave_look_stand(rover, nav, s, goal, frame_maps=None):
     """A look stand is done once reached and faced; the wall feet around it that are still unseen
     (hidden behind a rock) stay open for another stand until LOOK_TRIES stands faced them."""
     explore.ignore_disc(nav.look_stand_done, goal, explore.LOOK_STAND_DONE_M)
-    free, obstacle, _unknown = _grids(rover)
+    free, obstacle, _unknown = paths.grids(rover)
     unsearched = _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle)
     explore.give_up_faced(nav.look_tries, nav.look_done, unsearched, s.pos)
 
@@ -760,7 +745,7 @@ def _face_unsearched(rover, nav, s, goal, frame_maps=None):
         nav.search_faced_goal, nav.search_faces = goal, 0
     if nav.search_faces >= SEARCH_FACES_PER_GOAL:
         return False
-    free, obstacle, _unknown = _grids(rover)
+    free, obstacle, _unknown = paths.grids(rover)
     heading = explore.face_heading(_unsearched_wall_feet(rover, nav, frame_maps, free, obstacle), s.pos, s.yaw)
     if heading is None:
         return False
@@ -788,8 +773,8 @@ def mode_sample(rover, nav, s):
     if dist > SAMPLE_VISUAL_M:
         # far: the planner knows the walls, a straight line at the rock may not
         goal = grid.world_to_cell(nav.rock_target)
-        if nav.path_goal != ("rock", goal) or _needs_replan(nav, s):
-            _plan_to(rover, nav, s, "rock", goal)
+        if nav.path_goal != ("rock", goal) or paths.needs_replan(nav, s):
+            paths.plan_to(rover, nav, s, "rock", goal)
         if len(nav.path_xy) >= 2:
             return _follow_path(nav, s, SAMPLE_PATH_SPEED_MPS, slow_at_end=True)
     if s.t - nav.rock_seen_time <= SAMPLE_VISION_MEMORY_S:
@@ -831,13 +816,13 @@ def _stage_approach(rover, nav, s, dist):
                                            nav.rock_target[1] - nav.stage_for[1]) > ROCK_SAME_M:
         if dist > STAGE_DECIDE_M:
             return None
-        free = _grids(rover)[0]
+        free = paths.grids(rover)[0]
         nav.stage_for, nav.stage_done = nav.rock_target, False
         # each decided approach gets its own SAMPLE_CLOSE_TIMEOUT_S (SAMPLE_TIMEOUT_S still bounds the
         # rock): seed 37 (15 fps) wedged twice at the east nook, and the close timer ran out as it drove
         # to the third staging point, the one that works; it came back 70 s later and collected from there
         nav.rock_close_since = None
-        nav.stage = approach.plan_approach(free, _blocked(nav, s), nav.rock_target, _arrival_point(nav, s))
+        nav.stage = approach.plan_approach(free, paths.blocked_cells(nav, s), nav.rock_target, _arrival_point(nav, s))
         if nav.stage is not None:
             log.info("rock at (%.1f, %.1f): lining up at (%.1f, %.1f) first", *nav.rock_target, *nav.stage[:2])
     if nav.stage is None or nav.stage_done:
@@ -848,8 +833,8 @@ def _stage_approach(rover, nav, s, dist):
     if d_stage > (STAGE_BEHIND_REACHED_M if behind else STAGE_REACHED_M):
         goal = grid.world_to_cell((sx, sy))
         if d_stage > PATH_END_SLOW_M / 2:
-            if nav.path_goal != ("stage", goal) or _needs_replan(nav, s):
-                _plan_to(rover, nav, s, "stage", goal)
+            if nav.path_goal != ("stage", goal) or paths.needs_replan(nav, s):
+                paths.plan_to(rover, nav, s, "stage", goal)
             if len(nav.path_xy) >= 2:
                 return _follow_path(nav, s, SAMPLE_PATH_SPEED_MPS, slow_at_end=True)
         alpha = pursuit.bearing(s.pos, s.yaw, (sx, sy))
@@ -878,8 +863,8 @@ def mode_home(rover, nav, s):
         log.info("home at t=%.1f (%.2f m from start)", s.t, dist)
         return Command(0.0, BRAKE_STOP, 0.0)
     goal = grid.world_to_cell(home)
-    if nav.path_goal != ("home", goal) or _needs_replan(nav, s):
-        _plan_to(rover, nav, s, "home", goal)
+    if nav.path_goal != ("home", goal) or paths.needs_replan(nav, s):
+        paths.plan_to(rover, nav, s, "home", goal)
     if len(nav.path_xy) >= 2 and dist > PATH_END_SLOW_M:
         return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=True)
     # last metres: drive straight at the start point
@@ -994,7 +979,7 @@ def _follow_path(nav, s, max_speed, slow_at_end):
     x, y, yaw = predict.predict_pose(s.pos[0], s.pos[1], s.yaw, s.vel, nav.lead.yaw_rate_dps, nav.lead.lead_s)
     steer, alpha, pt, idx, remaining = pursuit.pursue(nav.path_xy, (x, y), yaw, s.vel, nav.path_idx)
     nav.path_idx = idx
-    _track_goal_progress(nav, s, remaining)
+    paths.track_goal_progress(nav, s, remaining)
     speed = max_speed
     if slow_at_end:
         speed = min(speed, max(MIN_DRIVE_SPEED_MPS, 0.8 * remaining))
@@ -1011,37 +996,7 @@ def _wall_follow(nav, s):
     return _drive_heading(nav, s, wanted, CRUISE_SPEED_MPS)
 
 
-def _track_goal_progress(nav, s, remaining):
-    if remaining < nav.goal_best - GOAL_PROGRESS_M:
-        nav.goal_best = remaining
-        nav.goal_best_time = s.t
-
-
-def _goal_stalled(nav, s):
-    return s.t - nav.goal_best_time > GOAL_PROGRESS_S or nav.loops.circling()
-
-
-def _reset_goal_progress(nav, s):
-    nav.goal_best = math.inf
-    nav.goal_best_time = s.t
-
-
-def _needs_replan(nav, s):
-    if s.t - nav.plan_time >= REPLAN_S or len(nav.path_xy) < 2:
-        return True
-    i = pursuit.closest_index(nav.path_xy, s.pos, nav.path_idx)
-    p = nav.path_xy[i]
-    return math.hypot(p[0] - s.pos[0], p[1] - s.pos[1]) > OFF_PATH_M
-
-
 # ============================== planning ===============================================
-
-def _grids(rover):
-    """(free, obstacle, unknown) from perception's drive map: sand in shadow is not driven on."""
-    wm = perception.drive_map(rover)
-    if not isinstance(wm, np.ndarray) or wm.shape != (grid.GRID_SIZE, grid.GRID_SIZE, 3):
-        wm = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE, 3), np.uint8)
-    return grid.classify(wm)
 
 
 def _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle):
@@ -1057,63 +1012,9 @@ def _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle):
     return cached
 
 
-def _roughness(rover):
-    """Per-cell roughness from perception's votes, or None before perception has run."""
-    if getattr(rover, "perception_memory", None) is None:
-        return None
-    return grid.roughness(*perception.occupancy_grids(rover))
-
-
-def _start_cell(cost, s):
-    cell = grid.world_to_cell(s.pos)
-    return grid.nearest_passable(cost, cell) if cell is not None else None
-
-
-def _set_path(nav, s, kind, goal, cells):
-    if nav.path_goal is None or nav.path_goal[0] != kind or nav.path_goal[1] != goal:
-        log.debug("new %s goal %s from (%.1f, %.1f) at t=%.1f, %d path cells", kind, goal, s.pos[0], s.pos[1],
-                  s.t, len(cells))
-        _reset_goal_progress(nav, s)
-        nav.loops.reset()
-        nav.goal_since = s.t
-        nav.goal_from = s.pos
-    nav.path_goal = (kind, goal) if goal is not None else None
-    nav.path_xy = astar.cells_to_world(cells)
-    nav.path_idx = 0
-    nav.plan_time = s.t
-
-
-def _open_around_rover(cost, cell):
-    """The rover stands here, so its own cells are drivable whatever the map says (first frames, shadows)."""
-    r = OWN_CELLS_RADIUS
-    r1, r2 = max(cell[0] - r, 0), min(cell[0] + r + 1, grid.GRID_SIZE)
-    c1, c2 = max(cell[1] - r, 0), min(cell[1] + r + 1, grid.GRID_SIZE)
-    win = cost[r1:r2, c1:c2]
-    np.minimum(win, grid.UNKNOWN_COST, out=win)
-
-
-def _blocked(nav, s):
-    """Cells remembered as blocked (stuck spots), forgotten after BLOCKED_MEMORY_S."""
-    return (s.t - nav.blocked_at) < BLOCKED_MEMORY_S
-
-
-def _cost_grids(rover, nav, s, free, obstacle, allow_unknown):
-    """Cost grids to plan on, each with the rover's own cells open: with the stuck memory, then
-    (when there is any) without it, because stale stuck memory must never hide a goal."""
-    blocked = _blocked(nav, s)
-    rough = _roughness(rover)
-    for use_blocked in (True, False):
-        if not use_blocked and not blocked.any():
-            return
-        cost = grid.cost_grid(free, obstacle, blocked if use_blocked else None, allow_unknown=allow_unknown,
-                              soft_obstacles=True, rough=rough)
-        _open_around_rover(cost, grid.world_to_cell(s.pos))
-        yield cost
-
-
 def _plan_explore(rover, nav, s):
     """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
-    free, obstacle, unknown = _grids(rover)
+    free, obstacle, unknown = paths.grids(rover)
     _remember_unsearched(rover, nav, s, free, obstacle)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
     targets, cost, parent, dist = _frontier_targets(rover, nav, s, free, obstacle, mask)
@@ -1127,7 +1028,7 @@ def _plan_explore(rover, nav, s):
     if stand is not None:
         nav.no_frontier_plans = 0
         nav.explored = False
-        _set_path(nav, s, "frontier", stand, astar.path_to(parent, cost.shape, stand))
+        paths.set_path(nav, s, "frontier", stand, astar.path_to(parent, cost.shape, stand))
         return
     current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "frontier" else None
     committed = current is not None and s.t - nav.goal_since < FRONTIER_COMMIT_S
@@ -1139,12 +1040,12 @@ def _plan_explore(rover, nav, s):
             nav.hidden_frontiers = len(explore.ignored_frontiers(free, unknown, nav.frontier_abandoned, dist,
                                                                  obstacle, _seen_for_frontiers(nav, s)))
         nav.explored = nav.no_frontier_plans >= EXPLORED_CONFIRM_PLANS and s.t > EXPLORED_MIN_TIME_S
-        _set_path(nav, s, "frontier", None, [])
-        nav.plan_time = s.t - REPLAN_S + 0.5  # look again soon
+        paths.set_path(nav, s, "frontier", None, [])
+        nav.plan_time = s.t - paths.REPLAN_S + 0.5  # look again soon
         return
     nav.no_frontier_plans = 0
     nav.explored = False
-    _set_path(nav, s, "frontier", goal, astar.path_to(parent, cost.shape, goal))
+    paths.set_path(nav, s, "frontier", goal, astar.path_to(parent, cost.shape, goal))
 
 
 def _vanished_frontier_stand(nav, s, free, obstacle, dist):
@@ -1189,7 +1090,7 @@ def _pocket_targets(rover, nav, s, free, obstacle, none_left):
     unlooked = pockets & ~perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
     if not unlooked.any():
         return none_left
-    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
+    for cost in paths.cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
         dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
         targets, clusters = explore.pocket_entries(pockets, unlooked, free,
                                                    perception.looked_at_within(rover, explore.PEEK_RANGE_M),
@@ -1202,11 +1103,11 @@ def _pocket_targets(rover, nav, s, free, obstacle, none_left):
 
 
 def _plan_search(rover, nav, s, frame_maps=None):
-    free, obstacle, _unknown = _grids(rover)
-    cost = grid.cost_grid(free, obstacle, _blocked(nav, s), allow_unknown=False, soft_obstacles=True,
-                          rough=_roughness(rover))
+    free, obstacle, _unknown = paths.grids(rover)
+    cost = grid.cost_grid(free, obstacle, paths.blocked_cells(nav, s), allow_unknown=False, soft_obstacles=True,
+                          rough=paths.roughness(rover))
     cell = grid.world_to_cell(s.pos)
-    _open_around_rover(cost, cell)
+    paths.open_around_rover(cost, cell)
     dist, parent = astar.distance_field(cost, cell)
     unsearched = _remember_unsearched(rover, nav, s, free, obstacle, frame_maps)
     visited = nav.visits.visited()
@@ -1223,11 +1124,11 @@ def _plan_search(rover, nav, s, frame_maps=None):
     if goal is None:
         nav.search_left = False
         log.info("sample search finished at t=%.1f", s.t)
-        _set_path(nav, s, "search", None, [])
+        paths.set_path(nav, s, "search", None, [])
         return
     if nav.path_goal != (kind, goal):
         log.info("sample search: %s at %s from (%.1f, %.1f), t=%.1f", kind, goal, s.pos[0], s.pos[1], s.t)
-    _set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
+    paths.set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
 
 
 def _keep_search_goal(nav, s, chosen, dist, free, unsearched):
@@ -1284,21 +1185,6 @@ def _peek_goal(rover, nav, s, free, dist):
     targets = explore.peek_targets(free, shadow_floor, looked, nav.search_done, dist)
     current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "peek" else None
     return explore.choose_target(targets, s.pos, s.yaw, current)
-
-
-def _plan_to(rover, nav, s, kind, goal):
-    """A* to a fixed goal cell (rock, home), allowed through unmapped ground at a premium."""
-    free, obstacle, _unknown = _grids(rover)
-    cells = []
-    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=True):
-        start = _start_cell(cost, s)
-        g = goal if np.isfinite(cost[goal]) else grid.nearest_passable(cost, goal)
-        cells = astar.astar(cost, start, g) if (start is not None and g is not None) else []
-        if cells:
-            break
-    if not cells:
-        cells = [grid.world_to_cell(s.pos), goal]
-    _set_path(nav, s, kind, goal, cells)
 
 
 # ============================== goals ==================================================
@@ -1479,7 +1365,7 @@ def _frontier_targets(rover, nav, s, free, obstacle, mask):
     that reaches any (explore.frontier_targets), with that grid and its distance field; the last grid's
     when none does (no grid: [], None, None, None)."""
     targets, cost, parent, dist = [], None, None, None
-    for cost in _cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
+    for cost in paths.cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
         dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
         targets = explore.frontier_targets(mask, dist)
         if len(targets):
@@ -1489,6 +1375,6 @@ def _frontier_targets(rover, nav, s, free, obstacle, mask):
 
 def _frontier_reachable(rover, nav, s):
     """Any reachable frontier cluster on today's map (_plan_explore's test)."""
-    free, obstacle, unknown = _grids(rover)
+    free, obstacle, unknown = paths.grids(rover)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
     return bool(mask.any()) and len(_frontier_targets(rover, nav, s, free, obstacle, mask)[0]) > 0

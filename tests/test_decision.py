@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import decision
+from navigation import paths
 from rover_state import RoverState
 
 DT = 0.04  # twin telemetry period, s
@@ -560,7 +561,7 @@ def test_the_search_keeps_an_open_goal_unless_another_is_much_nearer():
     back and forth between the same few stands."""
     r = make_rover(pos=(100.5, 85.5), yaw=0.0, t=500.0)
     s = decision._read_inputs(r)
-    free, obstacle, _ = decision._grids(r)
+    free, obstacle, _ = paths.grids(r)
     dist = np.full((200, 200), np.inf)
     dist[80:91, 90:130] = np.abs(np.arange(90, 130) + 0.5 - 100.5)[None, :]
     unsearched = np.zeros((200, 200), bool)
@@ -610,7 +611,7 @@ def test_faint_pockets_are_driven_into_only_once_exploration_ran_out_of_frontier
     """Seed 3 (shadows on): pockets counted as unsearched from the start moved glances while exploring
     and cost 49 s with all six found anyway; seeds 14 and 17 need them only once the map is done."""
     r = _rover_beside_a_faint_slot()
-    free, obstacle, _unknown = decision._grids(r)
+    free, obstacle, _unknown = paths.grids(r)
     assert not decision._unsearched_wall_feet(r, r.nav, None, free, obstacle)[71:78, 108:111].any()
     s = decision._read_inputs(r)
     decision._plan_explore(r, r.nav, s)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 import decision
-from navigation import vanished
+from navigation import paths, vanished
 from tests.test_decision import make_rover
 
 
@@ -40,7 +40,7 @@ def test_the_stand_is_the_nearest_reachable_floor_within_reach():
 def test_a_search_goal_is_kept_until_the_rover_drove_away_from_where_it_chose_it():
     r = make_rover(pos=(103.8, 190.2))
     s = decision._read_inputs(r)
-    decision._set_path(r.nav, s, "look", (179, 100), [(190, 103), (179, 100)])
+    paths.set_path(r.nav, s, "look", (179, 100), [(190, 103), (179, 100)])
     assert decision._search_goal_committed(r.nav, s)  # turning in place to leave: kept
     r.pos = (103.8, 190.2 - decision.SEARCH_COMMIT_M - 0.1)
     assert not decision._search_goal_committed(r.nav, decision._read_inputs(r))
