@@ -36,7 +36,7 @@ from typing import Optional
 import numpy as np
 
 import perception
-from navigation import approach, astar, explore, grid, paths, predict, pursuit, reactive, rockmem, stuck, vanished
+from navigation import approach, astar, explore, grid, paths, predict, pursuit, reactive, rockmem, search_plan, stuck, vanished
 
 log = logging.getLogger(__name__)
 
@@ -81,14 +81,10 @@ FALLBACK_MIN_NAV_PIXELS = 50  # fallback needs this many nav pixels to drive, pi
 FRONTIER_REACHED_M = 1.5  # a frontier target this close is reached (and ignored if still frontier), m
 FRONTIER_COMMIT_S = 10.0  # a frontier target chosen this recently is kept while it is still frontier (no flip-flop while turning toward it), s
 SEARCH_FACES_PER_GOAL = 2  # turns to face unsearched wall feet at one reached search goal, at most
-SEARCH_GOAL_KINDS = ("peek", "search", "look")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet
 SEARCH_FACE_KINDS = ("peek", "look")  # ...those reached only to look at something beside them: the rover turns to face it
-SEARCH_KEEP_MARGIN_M = 6.0  # a look or far-floor goal still open is kept unless another is this much cheaper (explore.search_cost), m
 VANISHED_REACH_M = 3.0  # a frontier goal voted wall before it was seen from close is still driven to: the floor cell nearest it within this, m
-SEARCH_COMMIT_M = 3.0  # a search goal still open is kept until the rover has driven this far from where it chose it (a turn away from an arm's tip revealed new wall feet there and the rover turned back, twice: seed 7), m
 SEARCH_GOALS_PER_FRAME = 3  # search goals one frame may tick off as reached (a goal under the rover's wheels) before it plans the next one
 POCKET_TOUR_S = 120.0  # exploration looks into faint pockets (nearest first) for at most this long after it first ran out of frontier with samples missing, then leaves the rest to the sample search (a sample in no pocket waited for every pocket's tour); two or three cross-canyon drives, s
-SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
 EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
 PATH_END_SLOW_M = 3.0  # slow down over the last metres of a path to a sample or home, m
@@ -316,11 +312,6 @@ def _read_inputs(rover):
     )
 
 
-def _samples_missing(s):
-    """Whether samples may still be out there (an unknown count counts as missing)."""
-    return s.samples_remaining is None or s.samples_remaining > 0
-
-
 def _frame_reach(s):
     """This frame's reactive.reach_profile of the camera's pixels, read-only, computed once per Inputs (the
     line-of-sight bookkeeping and the driving modes both ask for it)."""
@@ -365,7 +356,7 @@ def _update_memory(rover, nav, s):
         nav.visits.update(s.t, grid.world_to_cell(s.pos))
         nav.loops.update(s.t, s.pos, s.yaw)
         explore.mark_seen_close(nav.seen_close, s.pos, s.yaw)
-        if _samples_missing(s):
+        if search_plan.samples_missing(s):
             explore.mark_seen_close(nav.seen_near, s.pos, s.yaw, explore.SEEN_CLOSE_SAMPLES_M)
             explore.mark_in_sight(nav.in_sight, getattr(rover, "worldmap", None), s.pos, s.yaw,
                                   explore.SEARCH_LOOK_M, perception.LOOK_HALF_ANGLE_DEG,
@@ -539,7 +530,7 @@ def _check_stuck(nav, s):
     for r, c in stuck.blocked_cells_ahead(s.pos, s.yaw):
         if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
             nav.blocked_at[r, c] = s.t
-    _give_up_search_goal_near(nav, s)
+    search_plan.give_up_search_goal_near(nav, s)
     _give_up_pocket_near(nav, s)
     return True
 
@@ -547,22 +538,10 @@ def _check_stuck(nav, s):
 def _give_up_pocket_near(nav, s):
     """A faint pocket the rover got stuck driving into is done (_pocket_done): many are a shaded slope, not
     a slot (seed 17, shadows on: 40 s of stuck on the slope at (64, 85) before the second sweep)."""
-    if nav.pocket_goal is not None and paths.goal_cell_near(nav, s, ("frontier",), SEARCH_STUCK_GIVE_UP_M) is not None:
+    if nav.pocket_goal is not None and paths.goal_cell_near(nav, s, ("frontier",), search_plan.SEARCH_STUCK_GIVE_UP_M) is not None:
         _pocket_done(nav)
         nav.pocket_goal = None
         nav.path_goal = None
-
-
-def _give_up_search_goal_near(nav, s):
-    """A search or peek target beside the place the rover just got stuck is not worth another try:
-    the floor far from the trail near the start is a field of small rocks (seed 23 got stuck there
-    three times in 30 s going for one search target)."""
-    goal = paths.goal_cell_near(nav, s, SEARCH_GOAL_KINDS, SEARCH_STUCK_GIVE_UP_M)
-    if goal is None:
-        return
-    kind = nav.path_goal[0]
-    explore.ignore_disc(nav.look_done if kind == "look" else nav.search_done, goal, _search_done_radius(kind))
-    nav.path_goal = None
 
 
 def _check_turn_blocked(nav, s):
@@ -696,10 +675,10 @@ def mode_forward(rover, nav, s):
 def mode_search(rover, nav, s):
     """Map complete, samples missing: peek into shadowed pockets and visit mapped floor far from
     the trail, nearest first; None when nothing is left."""
-    frame_maps = {}  # maps this frame's replan and face turn share (see _unsearched_wall_feet)
+    frame_maps = {}  # maps this frame's replan and face turn share (see search_plan.unsearched_wall_feet)
     for _goal in range(SEARCH_GOALS_PER_FRAME):
-        if nav.path_goal is None or nav.path_goal[0] not in SEARCH_GOAL_KINDS or paths.needs_replan(nav, s):
-            _plan_search(rover, nav, s, frame_maps)
+        if nav.path_goal is None or nav.path_goal[0] not in search_plan.SEARCH_GOAL_KINDS or paths.needs_replan(nav, s):
+            search_plan.plan_search(rover, nav, s, frame_maps)
         if not nav.search_left or nav.path_goal is None:
             return None
         kind, goal = nav.path_goal
@@ -711,28 +690,13 @@ def mode_search(rover, nav, s):
         if kind in SEARCH_FACE_KINDS and _face_unsearched(rover, nav, s, goal, frame_maps):
             return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
         if kind == "look":
-            _leave_look_stand(rover, nav, s, goal, frame_maps)
+            search_plan.leave_look_stand(rover, nav, s, goal, frame_maps)
         else:
-            explore.ignore_disc(nav.search_done, goal, _search_done_radius(kind))
+            explore.ignore_disc(nav.search_done, goal, search_plan.search_done_radius(kind))
         nav.plan_time = -math.inf
     # goals under the rover's wheels were ticked off; the next frame plans on (an empty path here
     # once sent seed 15 home with two samples missing)
     return Command(0.0, BRAKE_STOP if abs(s.vel) > STOPPED_SPEED_MPS else 0.0, 0.0)
-
-
-def _leave_look_stand(rover, nav, s, goal, frame_maps=None):
-    """A look stand is done once reached and faced; the wall feet around it that are still unseen
-    (hidden behind a rock) stay open for another stand until LOOK_TRIES stands faced them."""
-    explore.ignore_disc(nav.look_stand_done, goal, explore.LOOK_STAND_DONE_M)
-    free, obstacle, _unknown = paths.grids(rover)
-    unsearched = _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle)
-    explore.give_up_faced(nav.look_tries, nav.look_done, unsearched, s.pos)
-
-
-def _search_done_radius(kind):
-    """How far around a reached (or given-up) search goal counts as searched, m: a peek rules out the
-    shadow beside it, a far-floor visit the floor around it, a look the wall feet it turned to face."""
-    return {"peek": explore.PEEK_DONE_M, "look": explore.SEARCH_FACE_RADIUS_M}.get(kind, explore.SEARCH_MIN_AWAY_M)
 
 
 def _face_unsearched(rover, nav, s, goal, frame_maps=None):
@@ -746,7 +710,7 @@ def _face_unsearched(rover, nav, s, goal, frame_maps=None):
     if nav.search_faces >= SEARCH_FACES_PER_GOAL:
         return False
     free, obstacle, _unknown = paths.grids(rover)
-    heading = explore.face_heading(_unsearched_wall_feet(rover, nav, frame_maps, free, obstacle), s.pos, s.yaw)
+    heading = explore.face_heading(search_plan.unsearched_wall_feet(rover, nav, frame_maps, free, obstacle), s.pos, s.yaw)
     if heading is None:
         return False
     nav.search_faces += 1
@@ -896,7 +860,7 @@ def _start_rotation(nav, s, heading_deg, reason):
     nav.rotate_since = s.t
     nav.rotate_dir = None
     nav.rotate_via = None
-    if reason in SWEEP_REASONS and _samples_missing(s) and nav.unsearched is not None:
+    if reason in SWEEP_REASONS and search_plan.samples_missing(s) and nav.unsearched is not None:
         way = explore.sweep_direction(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
         if way * predict.wrap_deg(nav.rotate_heading - s.yaw) < 0:
             nav.rotate_dir = way
@@ -999,27 +963,14 @@ def _wall_follow(nav, s):
 # ============================== planning ===============================================
 
 
-def _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle):
-    """explore.unsearched_wall_feet, computed once per frame: a search replan and the face turn at a
-    reached goal can both ask in the same frame, from the same drive map and look map. ``frame_maps``
-    is the frame's dict (None: no sharing)."""
-    cached = None if frame_maps is None else frame_maps.get("unsearched_wall_feet")
-    if cached is None:
-        looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M) & nav.in_sight  # in view, not behind a rock
-        cached = explore.unsearched_wall_feet(free, obstacle, looked)
-        if frame_maps is not None:
-            frame_maps["unsearched_wall_feet"] = cached
-    return cached
-
-
 def _plan_explore(rover, nav, s):
     """Dijkstra from the rover over mapped ground; head for the best reachable frontier."""
     free, obstacle, unknown = paths.grids(rover)
-    _remember_unsearched(rover, nav, s, free, obstacle)
+    search_plan.remember_unsearched(rover, nav, s, free, obstacle)
     mask = explore.frontier_mask(free, unknown, nav.frontier_ignored, obstacle, _seen_for_frontiers(nav, s))
     targets, cost, parent, dist = _frontier_targets(rover, nav, s, free, obstacle, mask)
     was_pocket, nav.pocket_goal = nav.pocket_goal is not None, None
-    if not len(targets) and _samples_missing(s):
+    if not len(targets) and search_plan.samples_missing(s):
         targets, cost, parent, dist = _pocket_targets(rover, nav, s, free, obstacle, (targets, cost, parent, dist))
     nav.frontier_count = len(targets)
     # a pocket goal is mapped wall on purpose: not a frontier that vanished under a far vote
@@ -1100,91 +1051,6 @@ def _pocket_targets(rover, nav, s, free, obstacle, none_left):
             nav.pocket_goal = clusters == clusters[goal]
             return targets[(targets[:, 0] == goal[0]) & (targets[:, 1] == goal[1])], cost, parent, dist
     return none_left
-
-
-def _plan_search(rover, nav, s, frame_maps=None):
-    free, obstacle, _unknown = paths.grids(rover)
-    cost = grid.cost_grid(free, obstacle, paths.blocked_cells(nav, s), allow_unknown=False, soft_obstacles=True,
-                          rough=paths.roughness(rover))
-    cell = grid.world_to_cell(s.pos)
-    paths.open_around_rover(cost, cell)
-    dist, parent = astar.distance_field(cost, cell)
-    unsearched = _remember_unsearched(rover, nav, s, free, obstacle, frame_maps)
-    visited = nav.visits.visited()
-    chosen = explore.nearer_search_goal(_peek_goal(rover, nav, s, free, dist),
-                                        explore.search_target(free, visited, nav.search_done, dist, s.pos, s.yaw),
-                                        dist,
-                                        explore.nearest_target(explore.look_targets(unsearched, free, visited,
-                                                                                    nav.look_done, dist,
-                                                                                    nav.look_stand_done),
-                                                               s.pos, s.yaw),
-                                        s.pos, s.yaw)
-    chosen = _keep_search_goal(nav, s, chosen, dist, free, unsearched)
-    kind, goal = chosen if chosen is not None else ("search", None)
-    if goal is None:
-        nav.search_left = False
-        log.info("sample search finished at t=%.1f", s.t)
-        paths.set_path(nav, s, "search", None, [])
-        return
-    if nav.path_goal != (kind, goal):
-        log.info("sample search: %s at %s from (%.1f, %.1f), t=%.1f", kind, goal, s.pos[0], s.pos[1], s.t)
-    paths.set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
-
-
-def _keep_search_goal(nav, s, chosen, dist, free, unsearched):
-    """The current look or far-floor goal while it is still open and no more than SEARCH_KEEP_MARGIN_M
-    dearer (search_cost) than `chosen`, else `chosen`.
-
-    Replanning every 1.5 s picked the cheapest goal afresh; as the rover moved, a cluster's nearest
-    stand and the heading term moved too, and on seed 17 (15 fps) the search went back and forth
-    between the same few stands in the rock field by the start (one chosen three times in 40 s)."""
-    cur = nav.path_goal
-    if chosen is None or cur is None or cur == chosen or cur[0] not in ("look", "search") or cur[1] is None:
-        return chosen
-    kind, (r, c) = cur
-    if not (free[r, c] and np.isfinite(dist[r, c])):
-        return chosen
-    if kind == "look":
-        beside = unsearched[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2] & ~nav.look_done[max(r - 1, 0):r + 2,
-                                                                                        max(c - 1, 0):c + 2]
-        if nav.look_stand_done[r, c] or not beside.any():
-            return chosen
-    elif nav.search_done[r, c]:
-        return chosen
-    if _search_goal_committed(nav, s):
-        return cur
-    (cr, cc) = chosen[1]
-    costs = explore.search_cost([r, cr], [c, cc], [dist[r, c], dist[cr, cc]], s.pos, s.yaw)
-    return cur if costs[0] <= costs[1] + SEARCH_KEEP_MARGIN_M else chosen
-
-
-def _search_goal_committed(nav, s):
-    """True until the rover has driven SEARCH_COMMIT_M from where it chose its (still open) search goal.
-
-    Turning in place to leave an arm's tip, the camera swept the tip and mapped a little more floor
-    there; the wall feet beside that new floor, 4-5 m off, were not yet searched, their stand lay under
-    the rover and won, and the rover turned back (seed 7: twice in 25 s, then the spin detector fired).
-    Those wall feet stay open and are visited when they are the cheapest goal from somewhere else."""
-    if nav.goal_from is None:
-        return False
-    return math.hypot(s.pos[0] - nav.goal_from[0], s.pos[1] - nav.goal_from[1]) < SEARCH_COMMIT_M
-
-
-def _remember_unsearched(rover, nav, s, free, obstacle, frame_maps=None):
-    """Unsearched wall feet now (see _unsearched_wall_feet), kept in nav for the turns in place
-    until the next plan; None is kept once every sample is in."""
-    unsearched = _unsearched_wall_feet(rover, nav, frame_maps, free, obstacle)
-    nav.unsearched = unsearched if _samples_missing(s) else None
-    return unsearched
-
-
-def _peek_goal(rover, nav, s, free, dist):
-    """Best shadowed pocket to look into (see explore.peek_targets) on perception's pocket floor, or None."""
-    shadow_floor = perception.pocket_floor(rover) & ~free
-    looked = perception.looked_at_within(rover, explore.PEEK_RANGE_M)
-    targets = explore.peek_targets(free, shadow_floor, looked, nav.search_done, dist)
-    current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "peek" else None
-    return explore.choose_target(targets, s.pos, s.yaw, current)
 
 
 # ============================== goals ==================================================
@@ -1357,7 +1223,7 @@ def _seen_for_frontiers(nav, s):
     are missing (an arm's tip or a side pocket may hold one; small samples show from 3-5 m), from
     SEEN_CLOSE_M once all are in (the map alone is done sooner: seed 1 took 612 s instead of 507 s
     exploring at 5 m after its sixth sample)."""
-    return nav.seen_near if _samples_missing(s) else nav.seen_close
+    return nav.seen_near if search_plan.samples_missing(s) else nav.seen_close
 
 
 def _frontier_targets(rover, nav, s, free, obstacle, mask):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import decision
-from navigation import paths
+from navigation import paths, search_plan
 from rover_state import RoverState
 
 DT = 0.04  # twin telemetry period, s
@@ -341,10 +341,10 @@ def test_a_search_target_beside_a_stuck_spot_is_given_up():
     r = make_rover(pos=(92.0, 85.0))
     s = decision._read_inputs(r)
     r.nav.path_goal = ("search", (87, 94))  # 3 m away
-    decision._give_up_search_goal_near(r.nav, s)
+    search_plan.give_up_search_goal_near(r.nav, s)
     assert r.nav.path_goal is None and r.nav.search_done[87, 94]
     r.nav.path_goal = ("search", (87, 140))  # far away: the stuck was on the way, not at the target
-    decision._give_up_search_goal_near(r.nav, s)
+    search_plan.give_up_search_goal_near(r.nav, s)
     assert r.nav.path_goal == ("search", (87, 140)) and not r.nav.search_done[87, 140]
 
 
@@ -416,7 +416,7 @@ def test_wall_feet_a_look_stand_could_not_see_stay_open_for_another_stand():
     assert not r.nav.look_done[76:80, 123:127].any(), "the hidden wall feet are still to be searched"
     assert r.nav.look_tries[79, 123] == 1  # the south wall (row 79) at x 123
     r.nav.search_faced_goal = (84, 125)  # a second stand, also blind
-    decision._leave_look_stand(r, r.nav, s, (84, 125))
+    search_plan.leave_look_stand(r, r.nav, s, (84, 125))
     assert r.nav.look_done[79, 123], "faced from two stands and still unseen: given up"
 
 
@@ -568,14 +568,14 @@ def test_the_search_keeps_an_open_goal_unless_another_is_much_nearer():
     unsearched[79, 110:113] = True  # wall feet beside the current stand (80, 111)
     r.nav.path_goal = ("look", (80, 111))
     near = ("search", (85, 109))  # 9 m by path, straight ahead; the stand: 11 m and 24 deg off (14.4)
-    assert decision._keep_search_goal(r.nav, s, near, dist, free, unsearched) == ("look", (80, 111))
+    assert search_plan.keep_search_goal(r.nav, s, near, dist, free, unsearched) == ("look", (80, 111))
     much_nearer = ("search", (85, 101))
-    assert decision._keep_search_goal(r.nav, s, much_nearer, dist, free, unsearched) == much_nearer
+    assert search_plan.keep_search_goal(r.nav, s, much_nearer, dist, free, unsearched) == much_nearer
     r.nav.look_stand_done[80, 111] = True  # the stand was used meanwhile: no longer open
-    assert decision._keep_search_goal(r.nav, s, near, dist, free, unsearched) == near
+    assert search_plan.keep_search_goal(r.nav, s, near, dist, free, unsearched) == near
     r.nav.look_stand_done[80, 111] = False
     unsearched[:] = False  # its wall feet were seen
-    assert decision._keep_search_goal(r.nav, s, near, dist, free, unsearched) == near
+    assert search_plan.keep_search_goal(r.nav, s, near, dist, free, unsearched) == near
 
 
 def test_with_samples_missing_an_arm_tip_seen_from_6_m_is_still_a_frontier():
@@ -612,7 +612,7 @@ def test_faint_pockets_are_driven_into_only_once_exploration_ran_out_of_frontier
     and cost 49 s with all six found anyway; seeds 14 and 17 need them only once the map is done."""
     r = _rover_beside_a_faint_slot()
     free, obstacle, _unknown = paths.grids(r)
-    assert not decision._unsearched_wall_feet(r, r.nav, None, free, obstacle)[71:78, 108:111].any()
+    assert not search_plan.unsearched_wall_feet(r, r.nav, None, free, obstacle)[71:78, 108:111].any()
     s = decision._read_inputs(r)
     decision._plan_explore(r, r.nav, s)
     assert r.nav.pockets_open and r.nav.pocket_goal is not None, "no frontier left: into the slot"

@@ -1,11 +1,11 @@
 """A frontier voted wall from afar is still driven to (navigation.vanished); a search goal is kept
-until the rover has driven away from where it chose it (decision._search_goal_committed)."""
+until the rover has driven away from where it chose it (search_plan.search_goal_committed)."""
 import math
 
 import numpy as np
 
 import decision
-from navigation import paths, vanished
+from navigation import paths, search_plan, vanished
 from tests.test_decision import make_rover
 
 
@@ -41,6 +41,6 @@ def test_a_search_goal_is_kept_until_the_rover_drove_away_from_where_it_chose_it
     r = make_rover(pos=(103.8, 190.2))
     s = decision._read_inputs(r)
     paths.set_path(r.nav, s, "look", (179, 100), [(190, 103), (179, 100)])
-    assert decision._search_goal_committed(r.nav, s)  # turning in place to leave: kept
-    r.pos = (103.8, 190.2 - decision.SEARCH_COMMIT_M - 0.1)
-    assert not decision._search_goal_committed(r.nav, decision._read_inputs(r))
+    assert search_plan.search_goal_committed(r.nav, s)  # turning in place to leave: kept
+    r.pos = (103.8, 190.2 - search_plan.SEARCH_COMMIT_M - 0.1)
+    assert not search_plan.search_goal_committed(r.nav, decision._read_inputs(r))

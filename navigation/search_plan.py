@@ -1,0 +1,155 @@
+"""The sample search's planning: which place to visit next once the map is complete and samples are missing.
+
+Three kinds of goal compete, nearest by path first (explore.nearer_search_goal): a peek into shadowed
+floor the camera never saw from close, mapped floor far from the trail, and a stand facing wall feet
+the camera never saw from close (nooks). The search keeps its goal against flip-flops, ticks places off
+as searched, and gives up a goal where the rover got stuck. Kept apart from decision.py so the state
+machine there reads as modes; mode_search drives the goals chosen here. Functions take the rover, its
+`nav` memory (decision.NavMemory) and the frame's sanitised inputs `s` (decision.Inputs).
+"""
+import logging
+import math
+
+import numpy as np
+
+import perception
+from navigation import astar, explore, grid, paths
+
+log = logging.getLogger(__name__)
+
+SEARCH_GOAL_KINDS = ("peek", "search", "look")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet
+SEARCH_KEEP_MARGIN_M = 6.0  # a look or far-floor goal still open is kept unless another is this much cheaper (explore.search_cost), m
+SEARCH_COMMIT_M = 3.0  # a search goal still open is kept until the rover has driven this far from where it chose it (a turn away from an arm's tip revealed new wall feet there and the rover turned back, twice: seed 7), m
+SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
+
+
+def samples_missing(s):
+    """Whether samples may still be out there (an unknown count counts as missing)."""
+    return s.samples_remaining is None or s.samples_remaining > 0
+
+
+def plan_search(rover, nav, s, frame_maps=None):
+    """Set nav's path to the nearest open search goal (peek, far floor or look stand); when none is left,
+    clear nav.search_left. ``frame_maps`` shares per-frame maps with the face turn (unsearched_wall_feet)."""
+    free, obstacle, _unknown = paths.grids(rover)
+    cost = grid.cost_grid(free, obstacle, paths.blocked_cells(nav, s), allow_unknown=False, soft_obstacles=True,
+                          rough=paths.roughness(rover))
+    cell = grid.world_to_cell(s.pos)
+    paths.open_around_rover(cost, cell)
+    dist, parent = astar.distance_field(cost, cell)
+    unsearched = remember_unsearched(rover, nav, s, free, obstacle, frame_maps)
+    visited = nav.visits.visited()
+    chosen = explore.nearer_search_goal(_peek_goal(rover, nav, s, free, dist),
+                                        explore.search_target(free, visited, nav.search_done, dist, s.pos, s.yaw),
+                                        dist,
+                                        explore.nearest_target(explore.look_targets(unsearched, free, visited,
+                                                                                    nav.look_done, dist,
+                                                                                    nav.look_stand_done),
+                                                               s.pos, s.yaw),
+                                        s.pos, s.yaw)
+    chosen = keep_search_goal(nav, s, chosen, dist, free, unsearched)
+    kind, goal = chosen if chosen is not None else ("search", None)
+    if goal is None:
+        nav.search_left = False
+        log.info("sample search finished at t=%.1f", s.t)
+        paths.set_path(nav, s, "search", None, [])
+        return
+    if nav.path_goal != (kind, goal):
+        log.info("sample search: %s at %s from (%.1f, %.1f), t=%.1f", kind, goal, s.pos[0], s.pos[1], s.t)
+    paths.set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
+
+
+def keep_search_goal(nav, s, chosen, dist, free, unsearched):
+    """The current look or far-floor goal while it is still open and no more than SEARCH_KEEP_MARGIN_M
+    dearer (search_cost) than `chosen`, else `chosen`.
+
+    Replanning every 1.5 s picked the cheapest goal afresh; as the rover moved, a cluster's nearest
+    stand and the heading term moved too, and on seed 17 (15 fps) the search went back and forth
+    between the same few stands in the rock field by the start (one chosen three times in 40 s)."""
+    cur = nav.path_goal
+    if chosen is None or cur is None or cur == chosen or cur[0] not in ("look", "search") or cur[1] is None:
+        return chosen
+    kind, (r, c) = cur
+    if not (free[r, c] and np.isfinite(dist[r, c])):
+        return chosen
+    if kind == "look":
+        beside = unsearched[max(r - 1, 0):r + 2, max(c - 1, 0):c + 2] & ~nav.look_done[max(r - 1, 0):r + 2,
+                                                                                        max(c - 1, 0):c + 2]
+        if nav.look_stand_done[r, c] or not beside.any():
+            return chosen
+    elif nav.search_done[r, c]:
+        return chosen
+    if search_goal_committed(nav, s):
+        return cur
+    (cr, cc) = chosen[1]
+    costs = explore.search_cost([r, cr], [c, cc], [dist[r, c], dist[cr, cc]], s.pos, s.yaw)
+    return cur if costs[0] <= costs[1] + SEARCH_KEEP_MARGIN_M else chosen
+
+
+def search_goal_committed(nav, s):
+    """True until the rover has driven SEARCH_COMMIT_M from where it chose its (still open) search goal.
+
+    Turning in place to leave an arm's tip, the camera swept the tip and mapped a little more floor
+    there; the wall feet beside that new floor, 4-5 m off, were not yet searched, their stand lay under
+    the rover and won, and the rover turned back (seed 7: twice in 25 s, then the spin detector fired).
+    Those wall feet stay open and are visited when they are the cheapest goal from somewhere else."""
+    if nav.goal_from is None:
+        return False
+    return math.hypot(s.pos[0] - nav.goal_from[0], s.pos[1] - nav.goal_from[1]) < SEARCH_COMMIT_M
+
+
+def _peek_goal(rover, nav, s, free, dist):
+    """Best shadowed pocket to look into (see explore.peek_targets) on perception's pocket floor, or None."""
+    shadow_floor = perception.pocket_floor(rover) & ~free
+    looked = perception.looked_at_within(rover, explore.PEEK_RANGE_M)
+    targets = explore.peek_targets(free, shadow_floor, looked, nav.search_done, dist)
+    current = nav.path_goal[1] if nav.path_goal is not None and nav.path_goal[0] == "peek" else None
+    return explore.choose_target(targets, s.pos, s.yaw, current)
+
+
+def unsearched_wall_feet(rover, nav, frame_maps, free, obstacle):
+    """explore.unsearched_wall_feet, computed once per frame: a search replan and the face turn at a
+    reached goal can both ask in the same frame, from the same drive map and look map. ``frame_maps``
+    is the frame's dict (None: no sharing)."""
+    cached = None if frame_maps is None else frame_maps.get("unsearched_wall_feet")
+    if cached is None:
+        looked = perception.looked_at_within(rover, explore.SEARCH_LOOK_M) & nav.in_sight  # in view, not behind a rock
+        cached = explore.unsearched_wall_feet(free, obstacle, looked)
+        if frame_maps is not None:
+            frame_maps["unsearched_wall_feet"] = cached
+    return cached
+
+
+def remember_unsearched(rover, nav, s, free, obstacle, frame_maps=None):
+    """Unsearched wall feet now (see unsearched_wall_feet), kept in nav for the turns in place
+    until the next plan; None is kept once every sample is in."""
+    unsearched = unsearched_wall_feet(rover, nav, frame_maps, free, obstacle)
+    nav.unsearched = unsearched if samples_missing(s) else None
+    return unsearched
+
+
+def search_done_radius(kind):
+    """How far around a reached (or given-up) search goal counts as searched, m: a peek rules out the
+    shadow beside it, a far-floor visit the floor around it, a look the wall feet it turned to face."""
+    return {"peek": explore.PEEK_DONE_M, "look": explore.SEARCH_FACE_RADIUS_M}.get(kind, explore.SEARCH_MIN_AWAY_M)
+
+
+def leave_look_stand(rover, nav, s, goal, frame_maps=None):
+    """A look stand is done once reached and faced; the wall feet around it that are still unseen
+    (hidden behind a rock) stay open for another stand until LOOK_TRIES stands faced them."""
+    explore.ignore_disc(nav.look_stand_done, goal, explore.LOOK_STAND_DONE_M)
+    free, obstacle, _unknown = paths.grids(rover)
+    unsearched = unsearched_wall_feet(rover, nav, frame_maps, free, obstacle)
+    explore.give_up_faced(nav.look_tries, nav.look_done, unsearched, s.pos)
+
+
+def give_up_search_goal_near(nav, s):
+    """A search or peek target beside the place the rover just got stuck is not worth another try:
+    the floor far from the trail near the start is a field of small rocks (seed 23 got stuck there
+    three times in 30 s going for one search target)."""
+    goal = paths.goal_cell_near(nav, s, SEARCH_GOAL_KINDS, SEARCH_STUCK_GIVE_UP_M)
+    if goal is None:
+        return
+    kind = nav.path_goal[0]
+    explore.ignore_disc(nav.look_done if kind == "look" else nav.search_done, goal, search_done_radius(kind))
+    nav.path_goal = None
