@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import decision
-from navigation import paths, search_plan
+from navigation import exploration_plan, paths, search_plan
 from rover_state import RoverState
 
 DT = 0.04  # twin telemetry period, s
@@ -587,9 +587,9 @@ def test_with_samples_missing_an_arm_tip_seen_from_6_m_is_still_a_frontier():
     decision.decision_step(r)
     assert r.nav.seen_close[85, 130] and not r.nav.seen_near[85, 130]
     s = decision._read_inputs(r)
-    assert decision._seen_for_frontiers(r.nav, s) is r.nav.seen_near
+    assert exploration_plan.seen_for_frontiers(r.nav, s) is r.nav.seen_near
     r.samples_remaining = 0
-    assert decision._seen_for_frontiers(r.nav, decision._read_inputs(r)) is r.nav.seen_close
+    assert exploration_plan.seen_for_frontiers(r.nav, decision._read_inputs(r)) is r.nav.seen_close
 
 
 def _rover_beside_a_faint_slot():
@@ -614,18 +614,18 @@ def test_faint_pockets_are_driven_into_only_once_exploration_ran_out_of_frontier
     free, obstacle, _unknown = paths.grids(r)
     assert not search_plan.unsearched_wall_feet(r, r.nav, None, free, obstacle)[71:78, 108:111].any()
     s = decision._read_inputs(r)
-    decision._plan_explore(r, r.nav, s)
+    exploration_plan.plan_explore(r, r.nav, s)
     assert r.nav.pockets_open and r.nav.pocket_goal is not None, "no frontier left: into the slot"
     row, col = r.nav.path_goal[1]
     assert 75 <= row <= 78 and 108 <= col <= 110, "up to 3.5 m into the slot"
     r.nav.path_xy = np.array([(112.0, 85.0), (col + 0.5, row + 0.5)])
-    decision._pocket_done(r.nav)  # driven into; then the second sweep reopens ordinary frontier
+    exploration_plan.pocket_done(r.nav)  # driven into; then the second sweep reopens ordinary frontier
     r.nav.frontier_ignored[:] = False
-    decision._plan_explore(r, r.nav, s)
+    exploration_plan.plan_explore(r, r.nav, s)
     assert r.nav.path_goal is None and r.nav.pocket_goal is None, "a pocket driven into is not chased again"
     r2 = _rover_beside_a_faint_slot()
     r2.samples_remaining = 0
-    decision._plan_explore(r2, r2.nav, decision._read_inputs(r2))
+    exploration_plan.plan_explore(r2, r2.nav, decision._read_inputs(r2))
     assert r2.nav.path_goal is None and not r2.nav.pockets_open, "all six in: no pocket is worth a look"
 
 
@@ -634,25 +634,25 @@ def test_the_faint_pocket_tour_ends_after_its_time_budget():
     r = _rover_beside_a_faint_slot()
     s = decision._read_inputs(r)
     r.nav.pockets_open, r.nav.pocket_tour_end = True, s.t + 1.0  # the tour began POCKET_TOUR_S - 1 s ago
-    decision._plan_explore(r, r.nav, s)
+    exploration_plan.plan_explore(r, r.nav, s)
     assert r.nav.pocket_goal is not None, "still within the budget: into the slot"
     s.t = r.nav.pocket_tour_end + 0.5
-    decision._plan_explore(r, r.nav, s)
+    exploration_plan.plan_explore(r, r.nav, s)
     assert r.nav.path_goal is None and r.nav.pocket_goal is None, "budget spent: no pocket chased"
     r2 = _rover_beside_a_faint_slot()
     s2 = decision._read_inputs(r2)
-    decision._plan_explore(r2, r2.nav, s2)
-    assert r2.nav.pocket_tour_end == pytest.approx(s2.t + decision.POCKET_TOUR_S), "the budget starts with the tour"
+    exploration_plan.plan_explore(r2, r2.nav, s2)
+    assert r2.nav.pocket_tour_end == pytest.approx(s2.t + exploration_plan.POCKET_TOUR_S), "the budget starts with the tour"
 
 
 def test_a_faint_pocket_the_rover_got_stuck_in_is_done():
     """Seed 17 (shadows on): the rover spent 40 s stuck on a shaded slope it took for a pocket."""
     r = _rover_beside_a_faint_slot()
     s = decision._read_inputs(r)
-    decision._plan_explore(r, r.nav, s)
+    exploration_plan.plan_explore(r, r.nav, s)
     row, col = r.nav.path_goal[1]
     s.pos = (col + 0.5, row + 3.5)  # 3 m short of it, wedged
-    decision._give_up_pocket_near(r.nav, s)
+    exploration_plan.give_up_pocket_near(r.nav, s)
     assert r.nav.pocket_reached[row, col] and r.nav.path_goal is None
-    decision._plan_explore(r, r.nav, s)
+    exploration_plan.plan_explore(r, r.nav, s)
     assert r.nav.path_goal is None, "not chased again"
