@@ -25,6 +25,13 @@ Modes (one handler function each):
 
 Exploration resumes by itself after a sample because the frontier target is
 re-derived from the map, not from a script.
+
+This module is the state machine: which mode runs, and how each mode drives.
+What to drive to is planned beside it in navigation/: `exploration_plan`
+(frontier goals, faint pockets, when the map is complete), `search_plan` (the
+sample search's goals), `rock_choice` (which rock, and the memory of rocks given
+up or refuted) and `paths` (the maps planned on and the path in `nav`). Each
+holds its own tunable constants at its top.
 """
 import logging
 import math
@@ -36,8 +43,8 @@ from typing import Optional
 import numpy as np
 
 import perception
-from navigation import (approach, exploration_plan, explore, grid, paths, predict, pursuit, reactive, rockmem, search_plan,
-                        stuck)
+from navigation import (approach, exploration_plan, explore, grid, paths, predict, pursuit, reactive, rock_choice,
+                        search_plan, stuck)
 
 log = logging.getLogger(__name__)
 
@@ -78,18 +85,13 @@ BLOCKED_TURN_DEG = 60.0  # turn this far when the way ahead is blocked, degrees
 WALL_BIAS_STD = 0.6  # fallback wall hugging: steer to mean + this x std of nav angles (left wall)
 FALLBACK_MIN_NAV_PIXELS = 50  # fallback needs this many nav pixels to drive, pixels
 
-# --- planning ----------------------------------------------------------------------------
+# --- sample search (mode_search) and path ends ----------------------------------------
 SEARCH_FACES_PER_GOAL = 2  # turns to face unsearched wall feet at one reached search goal, at most
 SEARCH_FACE_KINDS = ("peek", "look")  # ...those reached only to look at something beside them: the rover turns to face it
 SEARCH_GOALS_PER_FRAME = 3  # search goals one frame may tick off as reached (a goal under the rover's wheels) before it plans the next one
 PATH_END_SLOW_M = 3.0  # slow down over the last metres of a path to a sample or home, m
 
 # --- samples -----------------------------------------------------------------------------
-ROCK_MIN_PIXELS = 3  # rock pixels needed to trust a rock in the current frame
-ROCK_CHASE_M = 10.0  # chase a rock seen in the camera closer than this, m
-ROCK_DETOUR_M = 25.0  # go for a remembered rock closer than this (straight line) while exploring, m
-ROCK_SAME_M = 2.0  # rock positions closer than this are the same rock, m
-COLLECTED_CLEAR_M = 3.0  # remembered rocks this close to a collected one are echoes of it, m (samples lie >= 5 m apart)
 SAMPLE_STOP_M = 0.9  # rock distance (rover origin) where approach speed reaches its floor, m
 SAMPLE_SPEED_GAIN = 0.5  # approach speed per metre of rock distance, 1/s
 SAMPLE_MIN_SPEED_MPS = 0.35  # creeping speed near a rock, m/s
@@ -97,11 +99,8 @@ SAMPLE_MAX_SPEED_MPS = 1.5  # fastest approach speed, m/s
 SAMPLE_ROTATE_DEG = 35.0  # turn in place toward a rock further off than this (when slow), degrees
 SAMPLE_STEER_GAIN = 1.0  # steering command per degree of rock bearing
 SAMPLE_TIMEOUT_S = 90.0  # give up a rock after this long in sample mode, s
-SAMPLE_CLOSE_TIMEOUT_S = 30.0  # ...or after this long within SAMPLE_VISUAL_M of it, s
-SAMPLE_VISUAL_M = 3.5  # closer than this the approach steers by the camera, farther it follows a planned path, m
+SAMPLE_CLOSE_TIMEOUT_S = 30.0  # ...or after this long within rock_choice.SAMPLE_VISUAL_M of it, s
 SAMPLE_PATH_SPEED_MPS = 3.0  # top speed on the way to a rock, m/s
-ROCK_SKIP_S = 60.0  # a given-up rock is ignored for this long, s
-SAMPLE_VISION_MEMORY_S = 1.0  # keep steering by vision this long after the rock left the frame, s
 PICKUP_STOP_SPEED_MPS = 0.04  # request pickup only below this speed (autonomy's gate is 0.05), m/s
 PICKUP_RETRY_S = 2.0  # re-request a pickup if picking_up did not start within this, s
 PICKUP_REACH_M = 0.84  # pickup point ahead of the rover origin, m
@@ -211,7 +210,7 @@ class NavMemory:
         # samples
         self.rock_target = None  # world (x, y) of the rock being approached
         self.rock_since = 0.0  # when the current rock target was chosen, s
-        self.rock_close_since = None  # when the rover first came within SAMPLE_VISUAL_M of it, s
+        self.rock_close_since = None  # when the rover first came within rock_choice.SAMPLE_VISUAL_M of it, s
         self.rock_seen_time = -math.inf  # last time the target was seen in the camera
         self.rock_bearing = 0.0  # last camera bearing of the target, rad
         self.rock_dist = math.inf  # last camera distance of the target, m
@@ -221,8 +220,8 @@ class NavMemory:
         self.collected = []  # world (x, y) of collected samples
         self.rock_skip = []  # (x, y, until_t)
         self.rock_refuted = []  # (x, y, best_pixels): approached and not found (navigation.rockmem)
-        self.rock_came_close = False  # this attempt brought the rover within SAMPLE_VISUAL_M of the target
-        self.rock_seen_close = False  # ...and the camera showed the target within SAMPLE_VISUAL_M
+        self.rock_came_close = False  # this attempt brought the rover within rock_choice.SAMPLE_VISUAL_M of the target
+        self.rock_seen_close = False  # ...and the camera showed the target within rock_choice.SAMPLE_VISUAL_M
         self.rock_best_px = 0  # most rock pixels of any camera sighting matched to the target this attempt
         self.pickup_sent_at = -math.inf
         self.was_picking = False
@@ -437,7 +436,7 @@ def _select_and_run(rover, nav, s):
         cmd = mode_stop(nav, s)
         if cmd is not None:
             return "stop", cmd
-    if _choose_rock(rover, nav, s):
+    if rock_choice.choose_rock(rover, nav, s):
         return _with_rotation("sample", mode_sample(rover, nav, s), nav)
     if s.t < nav.glance_hold_until:
         return "stop", Command(0.0, BRAKE_STOP, 0.0)  # a glance: the camera faces a nook for a moment
@@ -449,6 +448,58 @@ def _select_and_run(rover, nav, s):
         cmd = mode_home(rover, nav, s)
         return ("done", cmd) if nav.done else _with_rotation("home", cmd, nav)
     return _with_rotation("forward", mode_forward(rover, nav, s), nav)
+
+
+def _home_eta(nav, s):
+    """Estimated arrival time at home if the rover turned back now, s (canyon paths are not straight)."""
+    home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
+    return s.t + home_dist * HOME_DETOUR_FACTOR / HOME_SPEED_ESTIMATE_MPS
+
+
+def _should_search(nav, s):
+    """After the map is complete, with samples still missing and time left, search the far corners."""
+    if not (nav.explored and nav.second_sweep_done and nav.search_left):
+        return False
+    if s.samples_remaining is None or s.samples_remaining <= 0 or nav.home is None:
+        return False
+    if nav.path_goal is not None and nav.path_goal[0] == "home":
+        return False
+    return _home_eta(nav, s) <= _deadline(nav, s)
+
+
+def _should_go_home(rover, nav, s):
+    """Home when all samples are in and the map is done, or when time is running out."""
+    if nav.home is None:
+        return False
+    if nav.path_goal is not None and nav.path_goal[0] == "home":
+        return True
+    if _home_eta(nav, s) > _deadline(nav, s):
+        log.info("time is running out at t=%.1f: going home", s.t)
+        return True
+    if not nav.explored:
+        return False
+    missing = s.samples_remaining is not None and s.samples_remaining > 0
+    if (missing or nav.hidden_frontiers) and SECOND_SWEEP and not nav.second_sweep_done:
+        # an abandoned frontier that is still reachable (often behind cells remembered as stuck)
+        # means the map is not complete, even with every sample in
+        log.info("map complete with %d samples missing and %d abandoned frontiers reachable: second sweep",
+                 s.samples_remaining or 0, nav.hidden_frontiers)
+        nav.second_sweep_done = True
+        nav.frontier_ignored[:] = False
+        nav.frontier_abandoned[:] = False
+        nav.hidden_frontiers = 0
+        nav.explored = False
+        return False
+    if exploration_plan.frontier_reachable(rover, nav, s):
+        # the way into an arm was mapped as wall when the map was called complete; driving near it
+        # later for a sample opened it (seed 15, shadows on: the west arm was never entered)
+        log.info("a reachable frontier appeared after the map was called complete, t=%.1f: exploring on", s.t)
+        nav.explored = False
+        nav.no_frontier_plans = 0
+        nav.plan_time = -math.inf
+        return False
+    return True
+
 
 
 def _check_spinning(nav, s, mode):
@@ -491,7 +542,7 @@ def _span(hist, col_x, col_y):
 def _abandon_goal(nav, s):
     """Give up whatever the rover is heading for (the planner will pick something else)."""
     if nav.rock_target is not None:
-        _give_up_rock(nav, s)
+        rock_choice.give_up_rock(nav, s)
     elif nav.path_goal is not None and nav.path_goal[0] == "frontier" and nav.path_goal[1] is not None:
         exploration_plan.give_up_frontier(nav)
     nav.path_goal = None
@@ -694,26 +745,26 @@ def _face_unsearched(rover, nav, s, goal, frame_maps=None):
 def mode_sample(rover, nav, s):
     """Approach the target rock: along a planned path while far, by camera bearing for the last metres."""
     dist = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1])
-    if dist <= SAMPLE_VISUAL_M and nav.rock_close_since is None:
+    if dist <= rock_choice.SAMPLE_VISUAL_M and nav.rock_close_since is None:
         nav.rock_close_since = s.t
-    nav.rock_came_close |= dist <= SAMPLE_VISUAL_M
+    nav.rock_came_close |= dist <= rock_choice.SAMPLE_VISUAL_M
     close_for = s.t - nav.rock_close_since if nav.rock_close_since is not None else 0.0
     if s.t - nav.rock_since > SAMPLE_TIMEOUT_S or close_for > SAMPLE_CLOSE_TIMEOUT_S:
         log.info("giving up rock at (%.1f, %.1f) for now", *nav.rock_target)
-        _give_up_rock(nav, s)
+        rock_choice.give_up_rock(nav, s)
         nav.path_goal = None
         return Command(0.0, BRAKE_STOP, 0.0)
     staged = _stage_approach(rover, nav, s, dist)
     if staged is not None:
         return staged
-    if dist > SAMPLE_VISUAL_M:
+    if dist > rock_choice.SAMPLE_VISUAL_M:
         # far: the planner knows the walls, a straight line at the rock may not
         goal = grid.world_to_cell(nav.rock_target)
         if nav.path_goal != ("rock", goal) or paths.needs_replan(nav, s):
             paths.plan_to(rover, nav, s, "rock", goal)
         if len(nav.path_xy) >= 2:
             return _follow_path(nav, s, SAMPLE_PATH_SPEED_MPS, slow_at_end=True)
-    if s.t - nav.rock_seen_time <= SAMPLE_VISION_MEMORY_S:
+    if s.t - nav.rock_seen_time <= rock_choice.SAMPLE_VISION_MEMORY_S:
         alpha, dist = nav.rock_bearing, nav.rock_dist
         reason = "sample-vision"
     else:
@@ -749,7 +800,7 @@ def _stage_approach(rover, nav, s, dist):
     the heading the rover arrives with.
     """
     if nav.stage_for is None or math.hypot(nav.rock_target[0] - nav.stage_for[0],
-                                           nav.rock_target[1] - nav.stage_for[1]) > ROCK_SAME_M:
+                                           nav.rock_target[1] - nav.stage_for[1]) > rock_choice.ROCK_SAME_M:
         if dist > STAGE_DECIDE_M:
             return None
         free = paths.grids(rover)[0]
@@ -930,173 +981,3 @@ def _wall_follow(nav, s):
     wanted = float(np.mean(s.nav_angles) + WALL_BIAS_STD * np.std(s.nav_angles))
     wanted = float(np.clip(wanted, -math.radians(ROTATE_ENTER_DEG - 5), math.radians(ROTATE_ENTER_DEG - 5)))
     return _drive_heading(nav, s, wanted, CRUISE_SPEED_MPS)
-
-
-# ============================== planning ===============================================
-
-
-# ============================== goals ==================================================
-
-def _rock_is_known_done(nav, xy, t):
-    for c in nav.collected:
-        if math.hypot(xy[0] - c[0], xy[1] - c[1]) < COLLECTED_CLEAR_M:
-            return True
-    for x, y, until in nav.rock_skip:
-        if t < until and math.hypot(xy[0] - x, xy[1] - y) < ROCK_SAME_M:
-            return True
-    return rockmem.nearest_refuted(nav.rock_refuted, xy, ROCK_SAME_M) is not None
-
-
-def _new_rock_attempt(nav):
-    """Forget the camera evidence gathered for the previous target (see _give_up_rock)."""
-    nav.rock_came_close = nav.rock_seen_close = False
-    nav.rock_best_px = 0
-
-
-def _give_up_rock(nav, s):
-    """Drop the target rock: refuted for good when the rover came close and the camera never showed
-    it there (a misprojected far sighting: seed 5's phantom was chosen 7 times on a 60 s skip), else
-    skipped for ROCK_SKIP_S (a real rock that was hard to reach is tried again)."""
-    xy = nav.rock_target
-    close = nav.rock_came_close or math.hypot(xy[0] - s.pos[0], xy[1] - s.pos[1]) <= SAMPLE_VISUAL_M
-    if rockmem.was_refuted(close, nav.rock_seen_close):
-        log.info("rock at (%.1f, %.1f) approached and not found: refuted", *xy)
-        nav.rock_refuted = rockmem.add_refuted(nav.rock_refuted, xy, nav.rock_best_px, ROCK_SAME_M)
-    nav.rock_skip.append((xy[0], xy[1], s.t + ROCK_SKIP_S))
-    nav.rock_target = None
-    _new_rock_attempt(nav)
-
-
-def _camera_rock_refuted(nav, xy, pixels, dist):
-    """Is this camera sighting at a refuted spot without stronger evidence? A sighting close by
-    with more pixels than the refuting attempt saw lifts the refutation."""
-    k = rockmem.nearest_refuted(nav.rock_refuted, xy, ROCK_SAME_M)
-    if k is None:
-        return False
-    if rockmem.revives(nav.rock_refuted[k][2], pixels, dist, SAMPLE_VISUAL_M):
-        log.info("rock at (%.1f, %.1f) seen again from %.1f m with %d px: no longer refuted", *xy, dist, pixels)
-        nav.rock_refuted = nav.rock_refuted[:k] + nav.rock_refuted[k + 1:]
-        return False
-    return True
-
-
-def _switch_rock(nav, s, xy, lost):
-    """The camera shows another rock than the target: when the rover stood at the target and never
-    saw it there ('lost'), the camera found the real rock elsewhere and the target is refuted."""
-    old = nav.rock_target
-    if lost and not nav.rock_seen_close and math.hypot(xy[0] - old[0], xy[1] - old[1]) >= ROCK_SAME_M:
-        log.info("rock at (%.1f, %.1f) not there, the camera shows one at (%.1f, %.1f): refuted", *old, *xy)
-        nav.rock_refuted = rockmem.add_refuted(nav.rock_refuted, old, nav.rock_best_px, ROCK_SAME_M)
-    _new_rock_attempt(nav)
-
-
-def _choose_rock(rover, nav, s):
-    """Pick (or keep) the rock to approach: visible ones first, then remembered ones. True if any."""
-    if s.samples_remaining == 0:
-        nav.rock_target = None
-        return False
-    yaw = math.radians(s.yaw)
-    if s.rock_angles.size >= ROCK_MIN_PIXELS:
-        dist = float(np.min(s.rock_dists))
-        ang = float(np.mean(s.rock_angles[s.rock_dists <= dist + ROCK_SAME_M / 2]))  # nearest blob only
-        xy = (s.pos[0] + dist * math.cos(yaw + ang), s.pos[1] + dist * math.sin(yaw + ang))
-        same = nav.rock_target is not None and math.hypot(xy[0] - nav.rock_target[0],
-                                                          xy[1] - nav.rock_target[1]) < ROCK_SAME_M
-        target_d = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1]) \
-            if nav.rock_target is not None else math.inf
-        nearer = dist < target_d - ROCK_SAME_M
-        # the rover is (nearly) at the remembered spot and the camera does not show the rock there:
-        # the estimate was off (a far sighting can be 2-3 m out), so trust the rock the camera sees
-        lost = target_d <= SAMPLE_VISUAL_M and s.t - nav.rock_seen_time > SAMPLE_VISION_MEMORY_S
-        pixels = int(np.count_nonzero(s.rock_dists <= dist + ROCK_SAME_M / 2))
-        if dist <= ROCK_CHASE_M and not _camera_rock_refuted(nav, xy, pixels, dist) \
-                and not _rock_is_known_done(nav, xy, s.t) and (nav.rock_target is None or same or nearer or lost):
-            if nav.rock_target is None:
-                nav.rock_since = s.t
-                nav.rock_close_since = None
-                _new_rock_attempt(nav)
-            elif not same:
-                _switch_rock(nav, s, xy, lost)
-            nav.rock_target = xy
-            nav.rock_seen_time = s.t
-            nav.rock_best_px = max(nav.rock_best_px, pixels)
-            nav.rock_seen_close |= dist <= SAMPLE_VISUAL_M
-            nav.rock_bearing, nav.rock_dist = ang, dist
-            return True
-    if nav.rock_target is not None:
-        if _rock_is_known_done(nav, nav.rock_target, s.t):
-            nav.rock_target = None
-        else:
-            return True
-    best, best_d = None, math.inf
-    for xy in list(getattr(rover, "rocks_world", []) or []):
-        try:
-            xy = (float(xy[0]), float(xy[1]))
-        except (TypeError, ValueError, IndexError):
-            continue
-        if not (math.isfinite(xy[0]) and math.isfinite(xy[1])) or _rock_is_known_done(nav, xy, s.t):
-            continue
-        d = math.hypot(xy[0] - s.pos[0], xy[1] - s.pos[1])
-        if d < best_d:
-            best, best_d = xy, d
-    if best is not None and (best_d <= ROCK_DETOUR_M or nav.explored):
-        _new_rock_attempt(nav)
-        nav.rock_target = best
-        nav.rock_since = s.t
-        nav.rock_close_since = None
-        nav.rock_seen_time = -math.inf
-        return True
-    return False
-
-
-def _home_eta(nav, s):
-    """Estimated arrival time at home if the rover turned back now, s (canyon paths are not straight)."""
-    home_dist = math.hypot(nav.home[0] - s.pos[0], nav.home[1] - s.pos[1])
-    return s.t + home_dist * HOME_DETOUR_FACTOR / HOME_SPEED_ESTIMATE_MPS
-
-
-def _should_search(nav, s):
-    """After the map is complete, with samples still missing and time left, search the far corners."""
-    if not (nav.explored and nav.second_sweep_done and nav.search_left):
-        return False
-    if s.samples_remaining is None or s.samples_remaining <= 0 or nav.home is None:
-        return False
-    if nav.path_goal is not None and nav.path_goal[0] == "home":
-        return False
-    return _home_eta(nav, s) <= _deadline(nav, s)
-
-
-def _should_go_home(rover, nav, s):
-    """Home when all samples are in and the map is done, or when time is running out."""
-    if nav.home is None:
-        return False
-    if nav.path_goal is not None and nav.path_goal[0] == "home":
-        return True
-    if _home_eta(nav, s) > _deadline(nav, s):
-        log.info("time is running out at t=%.1f: going home", s.t)
-        return True
-    if not nav.explored:
-        return False
-    missing = s.samples_remaining is not None and s.samples_remaining > 0
-    if (missing or nav.hidden_frontiers) and SECOND_SWEEP and not nav.second_sweep_done:
-        # an abandoned frontier that is still reachable (often behind cells remembered as stuck)
-        # means the map is not complete, even with every sample in
-        log.info("map complete with %d samples missing and %d abandoned frontiers reachable: second sweep",
-                 s.samples_remaining or 0, nav.hidden_frontiers)
-        nav.second_sweep_done = True
-        nav.frontier_ignored[:] = False
-        nav.frontier_abandoned[:] = False
-        nav.hidden_frontiers = 0
-        nav.explored = False
-        return False
-    if exploration_plan.frontier_reachable(rover, nav, s):
-        # the way into an arm was mapped as wall when the map was called complete; driving near it
-        # later for a sample opened it (seed 15, shadows on: the west arm was never entered)
-        log.info("a reachable frontier appeared after the map was called complete, t=%.1f: exploring on", s.t)
-        nav.explored = False
-        nav.no_frontier_plans = 0
-        nav.plan_time = -math.inf
-        return False
-    return True
-
-

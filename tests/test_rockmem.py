@@ -4,7 +4,7 @@ import math
 import numpy as np
 
 import decision
-from navigation import rockmem
+from navigation import rock_choice, rockmem
 from tests.test_decision import make_rover
 
 
@@ -41,12 +41,12 @@ def test_a_remembered_rock_given_up_after_standing_on_it_unseen_is_never_chosen_
     s = decision._read_inputs(r)
     decision._abandon_goal(r.nav, s)  # the stuck monitor gives it up
     assert r.nav.rock_refuted and r.nav.rock_target is None
-    r.total_time += 10 * decision.ROCK_SKIP_S
-    assert not decision._choose_rock(r, r.nav, decision._read_inputs(r))
+    r.total_time += 10 * rock_choice.ROCK_SKIP_S
+    assert not rock_choice.choose_rock(r, r.nav, decision._read_inputs(r))
     # the camera shows a rock there from 2 m: stronger evidence, chased again
     r.pos, r.yaw = (102.5, 91.5), 0.0
     r.rock_angles, r.rock_dists = np.zeros(8), np.full(8, 2.0)
-    assert decision._choose_rock(r, r.nav, decision._read_inputs(r))
+    assert rock_choice.choose_rock(r, r.nav, decision._read_inputs(r))
     assert r.nav.rock_target is not None and math.hypot(r.nav.rock_target[0] - 104.5, r.nav.rock_target[1] - 91.5) < 1
     assert not r.nav.rock_refuted
 

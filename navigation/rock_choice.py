@@ -1,0 +1,139 @@
+"""Which sample rock to go for, and what the rover remembers about rocks it went for.
+
+A rock the camera shows close by comes first, then the nearest rock perception remembers on the
+map; collected rocks, rocks given up for a while, and rocks refuted by a close look that did not
+show them (navigation.rockmem) are left out. This memory grew rule by rule (phantom sightings,
+a target lost at close range, another rock in view); it lives here so decision.py's state machine
+only asks "is there a rock to approach?" (choose_rock) and "drop this one" (give_up_rock).
+Functions take the rover, its `nav` memory (decision.NavMemory) and the frame's sanitised inputs
+`s` (decision.Inputs).
+"""
+import logging
+import math
+
+import numpy as np
+
+from navigation import rockmem
+
+log = logging.getLogger(__name__)
+
+ROCK_MIN_PIXELS = 3  # rock pixels needed to trust a rock in the current frame
+ROCK_CHASE_M = 10.0  # chase a rock seen in the camera closer than this, m
+ROCK_DETOUR_M = 25.0  # go for a remembered rock closer than this (straight line) while exploring, m
+ROCK_SAME_M = 2.0  # rock positions closer than this are the same rock, m
+COLLECTED_CLEAR_M = 3.0  # remembered rocks this close to a collected one are echoes of it, m (samples lie >= 5 m apart)
+ROCK_SKIP_S = 60.0  # a given-up rock is ignored for this long, s
+SAMPLE_VISUAL_M = 3.5  # closer than this the approach steers by the camera, farther it follows a planned path, m
+SAMPLE_VISION_MEMORY_S = 1.0  # keep steering by vision this long after the rock left the frame, s
+
+
+def choose_rock(rover, nav, s):
+    """Pick (or keep) the rock to approach: visible ones first, then remembered ones. True if any."""
+    if s.samples_remaining == 0:
+        nav.rock_target = None
+        return False
+    yaw = math.radians(s.yaw)
+    if s.rock_angles.size >= ROCK_MIN_PIXELS:
+        dist = float(np.min(s.rock_dists))
+        ang = float(np.mean(s.rock_angles[s.rock_dists <= dist + ROCK_SAME_M / 2]))  # nearest blob only
+        xy = (s.pos[0] + dist * math.cos(yaw + ang), s.pos[1] + dist * math.sin(yaw + ang))
+        same = nav.rock_target is not None and math.hypot(xy[0] - nav.rock_target[0],
+                                                          xy[1] - nav.rock_target[1]) < ROCK_SAME_M
+        target_d = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1]) \
+            if nav.rock_target is not None else math.inf
+        nearer = dist < target_d - ROCK_SAME_M
+        # the rover is (nearly) at the remembered spot and the camera does not show the rock there:
+        # the estimate was off (a far sighting can be 2-3 m out), so trust the rock the camera sees
+        lost = target_d <= SAMPLE_VISUAL_M and s.t - nav.rock_seen_time > SAMPLE_VISION_MEMORY_S
+        pixels = int(np.count_nonzero(s.rock_dists <= dist + ROCK_SAME_M / 2))
+        if dist <= ROCK_CHASE_M and not _camera_rock_refuted(nav, xy, pixels, dist) \
+                and not _rock_is_known_done(nav, xy, s.t) and (nav.rock_target is None or same or nearer or lost):
+            if nav.rock_target is None:
+                nav.rock_since = s.t
+                nav.rock_close_since = None
+                _new_rock_attempt(nav)
+            elif not same:
+                _switch_rock(nav, s, xy, lost)
+            nav.rock_target = xy
+            nav.rock_seen_time = s.t
+            nav.rock_best_px = max(nav.rock_best_px, pixels)
+            nav.rock_seen_close |= dist <= SAMPLE_VISUAL_M
+            nav.rock_bearing, nav.rock_dist = ang, dist
+            return True
+    if nav.rock_target is not None:
+        if _rock_is_known_done(nav, nav.rock_target, s.t):
+            nav.rock_target = None
+        else:
+            return True
+    best, best_d = None, math.inf
+    for xy in list(getattr(rover, "rocks_world", []) or []):
+        try:
+            xy = (float(xy[0]), float(xy[1]))
+        except (TypeError, ValueError, IndexError):
+            continue
+        if not (math.isfinite(xy[0]) and math.isfinite(xy[1])) or _rock_is_known_done(nav, xy, s.t):
+            continue
+        d = math.hypot(xy[0] - s.pos[0], xy[1] - s.pos[1])
+        if d < best_d:
+            best, best_d = xy, d
+    if best is not None and (best_d <= ROCK_DETOUR_M or nav.explored):
+        _new_rock_attempt(nav)
+        nav.rock_target = best
+        nav.rock_since = s.t
+        nav.rock_close_since = None
+        nav.rock_seen_time = -math.inf
+        return True
+    return False
+
+
+def _rock_is_known_done(nav, xy, t):
+    for c in nav.collected:
+        if math.hypot(xy[0] - c[0], xy[1] - c[1]) < COLLECTED_CLEAR_M:
+            return True
+    for x, y, until in nav.rock_skip:
+        if t < until and math.hypot(xy[0] - x, xy[1] - y) < ROCK_SAME_M:
+            return True
+    return rockmem.nearest_refuted(nav.rock_refuted, xy, ROCK_SAME_M) is not None
+
+
+def _new_rock_attempt(nav):
+    """Forget the camera evidence gathered for the previous target (see give_up_rock)."""
+    nav.rock_came_close = nav.rock_seen_close = False
+    nav.rock_best_px = 0
+
+
+def give_up_rock(nav, s):
+    """Drop the target rock: refuted for good when the rover came close and the camera never showed
+    it there (a misprojected far sighting: seed 5's phantom was chosen 7 times on a 60 s skip), else
+    skipped for ROCK_SKIP_S (a real rock that was hard to reach is tried again)."""
+    xy = nav.rock_target
+    close = nav.rock_came_close or math.hypot(xy[0] - s.pos[0], xy[1] - s.pos[1]) <= SAMPLE_VISUAL_M
+    if rockmem.was_refuted(close, nav.rock_seen_close):
+        log.info("rock at (%.1f, %.1f) approached and not found: refuted", *xy)
+        nav.rock_refuted = rockmem.add_refuted(nav.rock_refuted, xy, nav.rock_best_px, ROCK_SAME_M)
+    nav.rock_skip.append((xy[0], xy[1], s.t + ROCK_SKIP_S))
+    nav.rock_target = None
+    _new_rock_attempt(nav)
+
+
+def _camera_rock_refuted(nav, xy, pixels, dist):
+    """Is this camera sighting at a refuted spot without stronger evidence? A sighting close by
+    with more pixels than the refuting attempt saw lifts the refutation."""
+    k = rockmem.nearest_refuted(nav.rock_refuted, xy, ROCK_SAME_M)
+    if k is None:
+        return False
+    if rockmem.revives(nav.rock_refuted[k][2], pixels, dist, SAMPLE_VISUAL_M):
+        log.info("rock at (%.1f, %.1f) seen again from %.1f m with %d px: no longer refuted", *xy, dist, pixels)
+        nav.rock_refuted = nav.rock_refuted[:k] + nav.rock_refuted[k + 1:]
+        return False
+    return True
+
+
+def _switch_rock(nav, s, xy, lost):
+    """The camera shows another rock than the target: when the rover stood at the target and never
+    saw it there ('lost'), the camera found the real rock elsewhere and the target is refuted."""
+    old = nav.rock_target
+    if lost and not nav.rock_seen_close and math.hypot(xy[0] - old[0], xy[1] - old[1]) >= ROCK_SAME_M:
+        log.info("rock at (%.1f, %.1f) not there, the camera shows one at (%.1f, %.1f): refuted", *old, *xy)
+        nav.rock_refuted = rockmem.add_refuted(nav.rock_refuted, old, nav.rock_best_px, ROCK_SAME_M)
+    _new_rock_attempt(nav)
