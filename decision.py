@@ -733,7 +733,8 @@ def _face_unsearched(rover, nav, s, goal, frame_maps=None):
     if nav.search_faces >= SEARCH_FACES_PER_GOAL:
         return False
     free, obstacle, _unknown = paths.grids(rover)
-    heading = explore.face_heading(search_plan.unsearched_wall_feet(rover, nav, frame_maps, free, obstacle), s.pos, s.yaw)
+    heading = explore.face_heading(search_plan.unsearched_wall_feet(rover, nav, frame_maps, free, obstacle),
+                                   s.pos, s.yaw)
     if heading is None:
         return False
     nav.search_faces += 1

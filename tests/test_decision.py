@@ -642,7 +642,8 @@ def test_the_faint_pocket_tour_ends_after_its_time_budget():
     r2 = _rover_beside_a_faint_slot()
     s2 = decision._read_inputs(r2)
     exploration_plan.plan_explore(r2, r2.nav, s2)
-    assert r2.nav.pocket_tour_end == pytest.approx(s2.t + exploration_plan.POCKET_TOUR_S), "the budget starts with the tour"
+    assert r2.nav.pocket_tour_end == pytest.approx(s2.t + exploration_plan.POCKET_TOUR_S), \
+        "the budget starts with the tour"
 
 
 def test_a_faint_pocket_the_rover_got_stuck_in_is_done():
