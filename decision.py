@@ -501,7 +501,6 @@ def _should_go_home(rover, nav, s):
     return True
 
 
-
 def _check_spinning(nav, s, mode):
     """Turning in place again and again without getting anywhere: drop the goal and back off
     (or, when that already failed here, drive ahead)."""
