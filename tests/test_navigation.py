@@ -610,3 +610,17 @@ def test_the_search_keeps_going_the_way_it_faces_unless_going_back_is_much_neare
     assert explore.nearer_search_goal((100, 97), None, dist, (100, 140), pos, 0.0)[1] == (100, 97)  # 3 m back beats 40 on
     targets = np.array([[100, 85, dist[100, 85], 5], [100, 120, dist[100, 120], 5]], np.float64)
     assert explore.nearest_target(targets) == behind and explore.nearest_target(targets, pos, 0.0) == ahead
+
+
+def test_navigation_never_imports_decision():
+    """decision.py's planners live in navigation/ and get what they need as arguments: an import of
+    decision there would be a cycle (decision imports them)."""
+    import ast
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parent.parent / "navigation"
+    for path in folder.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            assert not any(n == "decision" or n.startswith("decision.") for n in names), path.name
