@@ -126,14 +126,19 @@ def cast_shadow_cover(shadow: np.ndarray) -> np.ndarray:
     return np.clip((np.asarray(shadow, np.float32) - lo) / (hi - lo), 0.0, 1.0)
 
 
+def wall_foot_ramp(sand: np.ndarray, full_below: float, none_from: float) -> np.ndarray:
+    """float32 0..1: how much of a wall-foot term a terrain cell gets from its sand weight, 1 at and below
+    full_below, fading to 0 at none_from (open floor), shared by items 6 and 7."""
+    return np.clip((none_from - np.asarray(sand, np.float32)) / (none_from - full_below), 0.0, 1.0)
+
+
 def floor_red_gain(sand: np.ndarray, darkening: np.ndarray) -> np.ndarray:
     """Factor on the red channel of the terrain colour (item 6): the real wall-foot floor is redder than the
     colour table draws it, and shaded floor redder still (lit by the reddish sky alone); only the client's
     shadowed-sand colour test sees either, the starter's threshold never (red is not sand's darkest channel).
 
     darkening: 1 - the shadow's brightness factor where the floor is shaded (0 in sun), 0..1."""
-    lo, hi = WALL_FOOT_RED_FULL_BELOW, WALL_FOOT_RED_NONE_FROM
-    ramp = np.clip((hi - np.asarray(sand, np.float32)) / (hi - lo), 0.0, 1.0)
+    ramp = wall_foot_ramp(sand, WALL_FOOT_RED_FULL_BELOW, WALL_FOOT_RED_NONE_FROM)
     return ((1.0 + WALL_FOOT_RED_GAIN * ramp) * (1.0 + SHADOW_RED_PER_DARKENING * np.asarray(darkening, np.float32))
             ).astype(np.float32)
 
@@ -142,8 +147,7 @@ def shadowless_wall_foot_light(sand: np.ndarray) -> np.ndarray:
     """Brightness factor of the terrain colour at the quality levels without cast shadows (item 7): at the same
     wall-foot floor cells the shadowless drive reads darker than the drives with cast shadows, whose look the
     colour table was fitted on, while open sand reads the same."""
-    lo, hi = SHADOWLESS_WALL_FOOT_FULL_BELOW, SHADOWLESS_WALL_FOOT_NONE_FROM
-    ramp = np.clip((hi - np.asarray(sand, np.float32)) / (hi - lo), 0.0, 1.0)
+    ramp = wall_foot_ramp(sand, SHADOWLESS_WALL_FOOT_FULL_BELOW, SHADOWLESS_WALL_FOOT_NONE_FROM)
     return (1.0 - SHADOWLESS_WALL_FOOT_DARKEN * ramp).astype(np.float32)
 
 
