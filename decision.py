@@ -175,7 +175,7 @@ class NavMemory:
         self.unsearched = None  # unsearched wall feet (explore.unsearched_wall_feet) at the last plan with samples missing, or None
         self.pockets_open = False  # exploration ran out of ordinary frontier with samples missing: faint pockets are looked into (logged once)
         self.pocket_tour_end = math.inf  # ...until then (exploration_plan.POCKET_TOUR_S after pockets_open), s
-        self.pocket_goal = None  # bool map of the faint pocket the current frontier goal drives into (explore.pocket_entries), or None
+        self.pocket_goal = None  # bool map of the faint pocket the current frontier goal drives into (explore.enterable_pockets), or None
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
         # planning

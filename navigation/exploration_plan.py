@@ -105,7 +105,7 @@ def _vanished_frontier_stand(nav, s, free, obstacle, dist):
 
 
 def _pocket_targets(rover, nav, s, free, obstacle, none_left):
-    """Frontier targets inside faint pockets (explore.pocket_entries) once no ordinary frontier is left with
+    """Frontier targets inside faint pockets (explore.enterable_pockets) once no ordinary frontier is left with
     samples missing: drive in to look before calling the map complete. Only then, so exploration keeps its
     order (every pocket a frontier from the start cost seed 0 290 s), and only that: counting pocket cells
     as unsearched wall feet moved glances and gave the search more stands (seed 3 on +49 s, seed 51 on
@@ -123,11 +123,11 @@ def _pocket_targets(rover, nav, s, free, obstacle, none_left):
     unlooked = pockets & ~perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
     if not unlooked.any():
         return none_left
+    clusters = explore.enterable_pockets(pockets, unlooked, free)
+    looked = perception.looked_at_within(rover, explore.PEEK_RANGE_M)
     for cost in paths.cost_grids(rover, nav, s, free, obstacle, allow_unknown=False):
         dist, parent = astar.distance_field(cost, grid.world_to_cell(s.pos))
-        targets, clusters = explore.pocket_entries(pockets, unlooked, free,
-                                                   perception.looked_at_within(rover, explore.PEEK_RANGE_M),
-                                                   nav.pocket_reached, dist)
+        targets = explore.peek_targets(free, clusters > 0, looked, nav.pocket_reached, dist)
         if len(targets):
             goal = explore.choose_target(targets, s.pos, s.yaw)
             nav.pocket_goal = clusters == clusters[goal]

@@ -438,14 +438,14 @@ def pocket_shapes(labels, n, free):
     return reach, width
 
 
-def pocket_entries(pockets, unlooked, free, looked, done, dist):
-    """(targets, clusters): one (row, col, path_cost, size) per cluster of `pockets` (faint_pockets) that
+def enterable_pockets(pockets, unlooked, free):
+    """int32 label map (0 elsewhere) of the clusters of `pockets` (faint_pockets) worth driving into: each
     still holds an `unlooked` cell, reaches FAINT_ENTER_REACH_M past the floor it opens onto and is at most
     FAINT_ENTER_WIDTH_M wide across (pocket_shapes: a nook, not a faint band along a shaded wall face or
-    slope): its deepest cell the rover can reach no more than PEEK_MAX_DEPTH_M from mapped floor
-    (peek_targets, minus `done`), and the int32 label map of those clusters (0 elsewhere). Driving into
-    every pocket on the map first (the west arm's 48-cell faint band, the south tip) cost seed 0 (shadows
-    on) the east-nook sample, in no pocket.
+    slope). Their entry targets are peek_targets(free, clusters > 0, ...): the deepest cell the rover can
+    reach no more than PEEK_MAX_DEPTH_M from mapped floor. Independent of the cost grid, so a planner
+    trying several grids labels the pockets once. Driving into every pocket on the map first (the west
+    arm's 48-cell faint band, the south tip) cost seed 0 (shadows on) the east-nook sample, in no pocket.
 
     Exploration drives in there, once no ordinary frontier is left with samples missing. The floor at a
     pocket's mouth was not enough: on seed 17 (shadows on) the mouth of the spur was looked at from 4 m
@@ -456,8 +456,7 @@ def pocket_entries(pockets, unlooked, free, looked, done, dist):
     keep[np.unique(labels[pockets & unlooked])] = True
     keep &= (reach >= FAINT_ENTER_REACH_M) & (width <= FAINT_ENTER_WIDTH_M)
     keep[0] = False
-    clusters = np.where(keep[labels], labels, 0).astype(np.int32)
-    return peek_targets(free, clusters > 0, looked, done, dist), clusters
+    return np.where(keep[labels], labels, 0).astype(np.int32)
 
 
 def _window(shape, pos, radius_m):

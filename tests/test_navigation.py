@@ -306,6 +306,12 @@ def test_faint_pockets_finds_a_slot_of_weak_sand_but_not_a_fuzzy_edge():
     assert not explore.faint_pockets(free2, obstacle2, share2)[99:102, 82:86].any()
 
 
+def _pocket_entries(pockets, unlooked, free, looked, done, dist):
+    """(targets, clusters) as exploration_plan._pocket_targets gets them for one cost grid."""
+    clusters = explore.enterable_pockets(pockets, unlooked, free)
+    return explore.peek_targets(free, clusters > 0, looked, done, dist), clusters
+
+
 def test_pocket_entry_drives_into_a_slot_whose_mouth_was_seen_but_not_its_depth():
     """Seed 17 (shadows on): the spur's mouth was looked at from 4 m while exploring; the sample lay 7 m in."""
     free, obstacle, share = _faint_slot_scene()
@@ -314,21 +320,21 @@ def test_pocket_entry_drives_into_a_slot_whose_mouth_was_seen_but_not_its_depth(
     looked = np.zeros((200, 200), bool)
     looked[:, :82] = True  # the mouth (x 80-81) seen from close, the rest not
     done = np.zeros((200, 200), bool)
-    targets, clusters = explore.pocket_entries(pockets, pockets & ~looked, free, looked, done, dist)
+    targets, clusters = _pocket_entries(pockets, pockets & ~looked, free, looked, done, dist)
     assert len(targets) == 1
     row, col = int(targets[0][0]), int(targets[0][1])
     assert pockets[row, col] and 82 <= col <= 80 + explore.PEEK_MAX_DEPTH_M, "inside the slot, past the seen mouth"
     assert clusters[row, col] > 0 and (clusters > 0).sum() == pockets.sum()
-    targets, _ = explore.pocket_entries(pockets, np.zeros((200, 200), bool), free, looked, done, dist)
+    targets, _ = _pocket_entries(pockets, np.zeros((200, 200), bool), free, looked, done, dist)
     assert len(targets) == 0, "every cell looked at: nothing to drive into"
     done[pockets] = True
-    assert len(explore.pocket_entries(pockets, pockets, free, looked, done, dist)[0]) == 0
+    assert len(_pocket_entries(pockets, pockets, free, looked, done, dist)[0]) == 0
     none_done = np.zeros((200, 200), bool)
     shallow = pockets & (np.arange(200) < 82)[None, :]  # 2 m past the floor: seen from the floor beside it
-    assert len(explore.pocket_entries(shallow, shallow, free, looked, none_done, dist)[0]) == 0
+    assert len(_pocket_entries(shallow, shallow, free, looked, none_done, dist)[0]) == 0
     band = np.zeros((200, 200), bool)
     band[106:112, 40:80] = True  # a faint band 6 m deep along the whole north wall: a shaded wall face
-    assert len(explore.pocket_entries(band, band, free, looked, none_done, dist)[0]) == 0
+    assert len(_pocket_entries(band, band, free, looked, none_done, dist)[0]) == 0
 
 
 def _shapes(pocket, free):
