@@ -36,6 +36,8 @@ CX, CY = 160.0, 80.0  # principal point, px
 CAMERA_MOUNT_UP_M = 0.2391  # camera above the rover root, m
 CAMERA_MOUNT_FORWARD_M = 0.4287  # camera ahead of the rover root, m
 ROOT_BELOW_GROUND_M = 0.0245  # rover root sits this far below the ground (suspension bottomed out), m
+ROCK_NEAR_CELL_M = 0.5  # cell of the "any rock within a wheel's reach" raster that skips the wheel lookups, m
+ROCK_LIFT_MAX_M = 0.5  # a rock top at most this far above the terrain under a wheel carries that wheel (the camera rises with it), m
 JPEG_QUALITY = 75  # Texture2D.EncodeToJPG default quality
 
 # --- raymarch ---
@@ -277,6 +279,19 @@ def bake_rasters(world: World):
             "cground": cground, "cbottom": cbottom,
             "sand": sand.astype(np.float32), "shadow": shadow.astype(np.float32),
             "has_rock": has_rock, "light": light.astype(np.float32), "sun": sun}
+
+
+def _rock_near_raster(world) -> np.ndarray:
+    """bool raster, ROCK_NEAR_CELL_M cells: True where a rock cell lies within 1 m (beyond the wheels' 0.55 m from
+    the root) of any point of the cell, so `Renderer._rock_lift` looks under the wheels only there."""
+    k = max(1, int(round(ROCK_NEAR_CELL_M / float(world.rock_cell_m))))
+    rock = world.rock_top > 0.0
+    n = -(-rock.shape[0] // k)
+    padded = np.zeros((n * k, n * k), bool)
+    padded[: rock.shape[0], : rock.shape[1]] = rock
+    coarse = padded.reshape(n, k, n, k).any(axis=(1, 3)).astype(np.uint8)
+    reach = int(math.ceil(1.0 / ROCK_NEAR_CELL_M))
+    return cv2.dilate(coarse, np.ones((2 * reach + 1, 2 * reach + 1), np.uint8)).astype(bool)
 
 
 def _smooth_over(rgb: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -953,6 +968,7 @@ class Renderer:
         self.last_shared = np.zeros((IMAGE_H, IMAGE_W), np.uint8)
         self._last_camera = None
         self._terrain = np.ascontiguousarray(world.terrain_height, dtype=np.float32)
+        self._rock_near = _rock_near_raster(world)  # any rock cell within a wheel's reach, per ROCK_NEAR_CELL_M cell
         self._tread = None  # tyre-track tread mask, loaded with the first tracks drawn
         self._track_rgb = None  # lit colour of a track texel on level floor, 0..255 RGB
         self._sample_ground = {}  # (x, y) of a sample spot -> terrain height there, m
@@ -978,10 +994,43 @@ class Renderer:
         if rest:
             root_z = rest[0]
         else:
-            root_z = float(self.world.height_at(x, y)) - ROOT_BELOW_GROUND_M
+            root_z = float(self.world.height_at(x, y)) - ROOT_BELOW_GROUND_M + self._rock_lift(x, y, yaw)
         mount = np.array([0.0, CAMERA_MOUNT_UP_M, CAMERA_MOUNT_FORWARD_M])
         origin = np.array([x, y, root_z]) + rot @ mount
         return origin, rot
+
+    def _rock_lift(self, x: float, y: float, yaw_deg: float) -> float:
+        """How far the rover root rises above its terrain height when wheels stand on a rock, m (0 off rocks).
+
+        A pose without a height (a logged drive) used to put the camera at terrain height even with the rover
+        on a boulder, inside the rock's columns; the real rover stands on its wheels. The wheels' support plane
+        is taken as the physics does (sim/physics.py `_plane`): the rock top under a wheel where one is within
+        ROCK_LIFT_MAX_M above the terrain, else the terrain; the lift is that plane's height at the root minus the
+        terrain-only plane's."""
+        from sim import contact as C
+
+        near = self._rock_near
+        if not near[min(max(int(y / ROCK_NEAR_CELL_M), 0), near.shape[0] - 1),
+                    min(max(int(x / ROCK_NEAR_CELL_M), 0), near.shape[1] - 1)]:
+            return 0.0  # no rock cell within a wheel's reach of the root: the common case, no lookups
+        yaw = math.radians(yaw_deg)
+        c, s = math.cos(yaw), math.sin(yaw)
+        x, y = float(x), float(y)
+        wheels = [(x + f * c - l * s, y + f * s + l * c) for f, l in zip(C.WHEEL_F_M, C.WHEEL_L_M)]
+        spans = [self.world.rock_span_at(wx, wy) for wx, wy in wheels]
+        terrain, support = [], []
+        for (wx, wy), (bottom, top) in zip(wheels, spans):
+            h = float(self.world.height_at(wx, wy))
+            on_rock = h + 0.01 < top <= h + ROCK_LIFT_MAX_M and bottom <= h + 0.01
+            terrain.append(h)
+            support.append(top if on_rock else h)
+
+        def plane_z(w):
+            front, rear = 0.5 * (w[0] + w[1]), 0.5 * (w[2] + w[3])
+            f_mid = 0.5 * (C.WHEEL_F_M[0] + C.WHEEL_F_M[2])
+            return 0.5 * (front + rear) - (front - rear) / C.WHEELBASE_M * f_mid
+
+        return max(0.0, plane_z(support) - plane_z(terrain))
 
     def render(self, pose, samples=(), tracks=None) -> np.ndarray:
         """uint8 RGB (160, 320, 3) for pose (x, y, yaw, pitch, roll) in degrees.

@@ -176,6 +176,34 @@ def test_explicit_root_height_raises_camera(flat_renderer):
     assert high > 2 * low
 
 
+def _world_with_rock_under_front_wheels(height_m):
+    """The flat world with a low block of rock under the front axle of a rover at (100, 100) heading +x."""
+    world = _flat_world()
+    top = world.rock_top.copy()
+    top[990:1011, 1035:1045] = height_m  # y 99-101 m, x 103.5-104.5 m (front wheels 0.386 m ahead of the root)
+    world.rock_top = top
+    return world
+
+
+def test_logged_pose_on_a_rock_raises_the_camera_by_the_wheels_support():
+    """A pose without a root height stands on its wheels: front wheels on a 0.2 m rock lift the root by the
+    support plane (front axle up 0.2 m: about 0.1 m at the root) and the camera sees the floor ahead farther off;
+    off the rock (and on a rock too tall for a wheel to stand on) nothing changes."""
+    flat = Renderer(_flat_world())
+    on_rock = Renderer(_world_with_rock_under_front_wheels(0.2))
+    too_tall = Renderer(_world_with_rock_under_front_wheels(2.0))
+    pose = (103.7, 100.0, 0.0, 0.0, 0.0)  # front wheels at x 104.09, on the block
+    lift = on_rock._rock_lift(*pose[:3])
+    assert 0.08 < lift < 0.12
+    assert too_tall._rock_lift(*pose[:3]) == 0.0
+    assert on_rock._rock_lift(90.0, 100.0, 0.0) == 0.0  # far from the rock
+    origin_flat, _ = flat.camera(pose)
+    origin_rock, _ = on_rock.camera(pose)
+    assert origin_rock[2] - origin_flat[2] == pytest.approx(lift)
+    # an explicit root height (the twin's physics) is used as given
+    assert on_rock.camera(pose + (0.3,))[0][2] == pytest.approx(flat.camera(pose + (0.3,))[0][2])
+
+
 def test_calibration_grid_matches_standard_points(flat_renderer):
     from sim import calibration
 
