@@ -13,7 +13,8 @@ Read from the simulator's scene (../shared/docs/simulator-facts.md section 2 and
 
 Rock shapes are rasterised once per world into small patches (PATCH_CELL_M) holding the
 [bottom, top] slab of rock per column plus, for contact response, how far a body part
-at body height is inside the rock (`depth`) and which way is out (`ex`, `ey`).
+at body height is inside the rock (`depth`) and which way is out (`ex`, `ey`).  Patches
+keep their spheres and hull facets for exact contact normals (RockField.contact_normals).
 Worlds without collider data (procedural, map PNG, test worlds) collide with their
 render envelopes (`rock_top`/`rock_bottom`) through the same patches.
 """
@@ -58,6 +59,8 @@ ESCAPE_SMOOTH_CELLS = 2.0  # Gaussian sigma (cells) smoothing the depth field be
 NO_ROCK_TOP = -1.0e9  # top value of a column without rock
 NO_ROCK_BOTTOM = 1.0e9  # bottom value of a column without rock
 ENVELOPE_MIN_CELLS = 1  # connected rock cells below this are ignored in envelope worlds
+TOP_EDGE_BAND_M = 0.1  # m, rock columns this close to the rock's outline count as a vertical side, not a top
+STEEP_SLOPE = 1.0e3  # slope (m/m) given to side columns: a horizontal contact normal
 
 
 def body_points() -> np.ndarray:
@@ -260,6 +263,10 @@ class Patch:
     depth: np.ndarray  # m, signed horizontal distance into body-height rock (negative outside), bilinear
     ex: np.ndarray  # unit escape direction x (from inside towards free space)
     ey: np.ndarray
+    sx: np.ndarray | None = None  # slope of the rock top along x (m/m; STEEP_SLOPE on the sides): the contact
+    sy: np.ndarray | None = None  # normals of rocks without collider shapes (meshes, render envelopes)
+    spheres: np.ndarray | None = None  # (K, 4) cx, cy, cz, r of the rock's collider spheres (exact normals)
+    hulls: list | None = None  # (F, 4) facet equations (a x + b y + c z + d <= 0 inside) of its convex hulls
 
     @property
     def bounds(self):
@@ -281,8 +288,32 @@ def _finish_patch(name, x0, y0, cell, bottom, top, ground) -> Patch:
     norm = np.hypot(gx, gy)
     norm[norm < 1e-9] = 1.0
     ex, ey = (-gx / norm).astype(np.float32), (-gy / norm).astype(np.float32)
+    sx, sy = top_slopes(top, cell)
     return Patch(name, float(x0), float(y0), float(cell), bottom.astype(np.float32), top.astype(np.float32),
-                 depth, ex, ey)
+                 depth, ex, ey, sx, sy)
+
+
+def top_slopes(top: np.ndarray, cell: float):
+    """(d top / dx, d top / dy) of a patch's rock top: for rocks without collider shapes (non-convex meshes,
+    render envelopes) the contact normal of a body part resting on it is (-sx, -sy, 1) normalised.
+
+    Columns within TOP_EDGE_BAND_M of the rock's outline get STEEP_SLOPE: there a body part meets the
+    rock's side (a box edge, a slab's face, a sphere's flank), whose normal is horizontal.
+    """
+    import cv2
+
+    rock = top > 0.5 * NO_ROCK_TOP
+    band = max(1, int(math.ceil(TOP_EDGE_BAND_M / cell - 1e-9)))
+    kernel = np.ones((2 * band + 1, 2 * band + 1), np.uint8)
+    inner = cv2.erode(rock.astype(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+    t = np.where(rock, top, 0.0)
+    sx, sy = np.full(top.shape, STEEP_SLOPE), np.full(top.shape, STEEP_SLOPE)
+    gx = np.zeros(top.shape)
+    gy = np.zeros(top.shape)
+    gx[:, 1:-1] = (t[:, 2:] - t[:, :-2]) / (2 * cell)
+    gy[1:-1, :] = (t[2:, :] - t[:-2, :]) / (2 * cell)
+    sx[inner], sy[inner] = gx[inner], gy[inner]
+    return sx.astype(np.float32), sy.astype(np.float32)
 
 
 def _ground_grid(height_at, xs, ys) -> np.ndarray:
@@ -316,8 +347,19 @@ def patches_from_shapes(shapes: list, height_at, fine_cell: float = PATCH_CELL_M
             else:
                 sb, st = _mesh_slab(s, x0, y0, nx, ny, cell)
             bottom, top = np.minimum(bottom, sb), np.maximum(top, st)
-        patches.append(_finish_patch(name, x0, y0, cell, bottom, top, _ground_grid(height_at, xs, ys)))
+        patch = _finish_patch(name, x0, y0, cell, bottom, top, _ground_grid(height_at, xs, ys))
+        if all(s.kind != "mesh" for s in group):
+            sph = [(*s.centre, s.radius) for s in group if s.kind == "sphere"]
+            patch.spheres = np.array(sph, dtype=np.float64).reshape(-1, 4)
+            patch.hulls = [_hull_equations(s.verts) for s in group if s.kind == "hull"]
+        patches.append(patch)
     return patches
+
+
+def _hull_equations(verts) -> np.ndarray:
+    from scipy.spatial import ConvexHull
+
+    return np.asarray(ConvexHull(verts).equations, dtype=np.float64)
 
 
 def patches_from_envelopes(world) -> list:
@@ -392,6 +434,50 @@ class RockField:
             _query_patch(xs, ys, p.x0, p.y0, p.cell, p.bottom, p.top, p.depth, p.ex, p.ey, bottom, top, depth, ex, ey)
         shape = px.shape
         return bottom.reshape(shape), top.reshape(shape), depth.reshape(shape), ex.reshape(shape), ey.reshape(shape)
+
+    @staticmethod
+    def contact_normals(patches: list, px: np.ndarray, py: np.ndarray, pz: np.ndarray, top: np.ndarray):
+        """Unit outward contact normals (nx, ny, nz) of the rock at body points (px, py, pz) inside it.
+
+        PhysX resolves a contact along the shapes' own normal: a sphere's centre -> point direction, a convex
+        hull's facet of least penetration.  Rocks without shapes (non-convex meshes, render envelopes) use the
+        rock-top slope there, horizontal on a rock's sides.  Of several rocks, the most deeply penetrated
+        one's normal is kept.  NumPy: asked only at the few points touching a rock.
+        """
+        n = px.shape[0]
+        nx, ny, nz = np.zeros(n), np.zeros(n), np.zeros(n)
+        best = np.full(n, -np.inf)
+        for p in patches:
+            x0, y0, x1, y1 = p.bounds
+            ok = (px >= x0) & (px <= x1) & (py >= y0) & (py <= y1)
+            if not ok.any():
+                continue
+            i = np.nonzero(ok)[0]
+            pts = np.stack([px[i], py[i], pz[i]], axis=1)
+            cand = []  # (penetration, normal) per shape
+            if p.spheres is not None:
+                for cx, cy, cz, r in p.spheres:
+                    v = pts - (cx, cy, cz)
+                    dist = np.sqrt(np.sum(v * v, axis=1))
+                    cand.append((r - dist, v / np.maximum(dist, 1e-9)[:, None]))
+                for eq in p.hulls or []:
+                    pen = -(pts @ eq[:, :3].T + eq[:, 3])  # >= 0 inside each facet's half-space
+                    k = np.argmin(pen, axis=1)
+                    cand.append((pen[np.arange(len(i)), k], eq[k, :3]))
+            elif p.sx is not None:
+                h, w = p.top.shape
+                c = np.clip(np.rint((px[i] - p.x0) / p.cell).astype(np.int64), 0, w - 1)
+                r = np.clip(np.rint((py[i] - p.y0) / p.cell).astype(np.int64), 0, h - 1)
+                sx, sy = np.float64(p.sx[r, c]), np.float64(p.sy[r, c])
+                norm = np.sqrt(1.0 + sx * sx + sy * sy)
+                pen = np.where(np.float64(p.top[r, c]) == top[i], (top[i] - pz[i]) / norm, -np.inf)
+                cand.append((pen, np.stack([-sx / norm, -sy / norm, 1.0 / norm], axis=1)))
+            for pen, nrm in cand:
+                deeper = pen > best[i]
+                j = i[deeper]
+                best[j] = pen[deeper]
+                nx[j], ny[j], nz[j] = nrm[deeper, 0], nrm[deeper, 1], nrm[deeper, 2]
+        return nx, ny, nz
 
     @staticmethod
     def query_numpy(patches: list, px: np.ndarray, py: np.ndarray):

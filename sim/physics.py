@@ -20,10 +20,12 @@ kinematic bicycle for heading, with every constant fitted to the real recordings
 * contact as the real rigid body has it (sim/contact.py holds the geometry): four
   ray-cast wheels stand on the floor plane, terrain or a rock top their ray reaches,
   and set pitch and roll; the body collides only through its plates and axle rods,
-  against the rocks' collider shapes and the terrain.  Overlap is resolved by pushing
-  the body out (turning in place is never refused, backing away from a face is never
-  opposed), the approach speed is removed with a little rebound, and a hard hit kicks
-  the nose up.
+  against the rocks' collider shapes and the terrain.  A rock contact is resolved along
+  the collider's own normal: where it is within SUPPORT_MAX_TILT_DEG of vertical (a low
+  rock top under a plate) the body is carried (lifted and pitched about its far axle);
+  otherwise it is a wall: the body is pushed out sideways (turning in place is never
+  refused, backing away from a face is never opposed), the approach speed is removed
+  with a little rebound, and a hard hit kicks the nose up.
 """
 from __future__ import annotations
 
@@ -86,6 +88,13 @@ TERRAIN_SLOPE_PROBE_M = 0.1  # m, half distance of the terrain-gradient probe at
 SIDE_GRIP = 1.0  # tan of the steepest roll the tyres hold without sliding sideways (sideways friction
 # asymptote 1.0; a real rover drove 27 m at up to 38 deg of roll)
 MIN_WALL_TAN = 0.25  # terrain contacts on gentler slopes push out at most overlap / this
+SUPPORT_MAX_TILT_DEG = 70.0  # deg from vertical: rock contact normals steeper than this carry the body (lift,
+# pitch), flatter ones are walls that push it sideways (the real rover rode up a 0.40 m sphere met at ~63 deg)
+SUPPORT_MIN_NZ = math.cos(math.radians(SUPPORT_MAX_TILT_DEG))  # vertical share of the steepest carrying normal
+SUPPORT_IMPULSE_SHARE = 0.5  # share of the speed along the contact normal removed when the body meets a rock top
+# (1 = inelastic point contact; 0.5 fitted on the one megalphian rock ride, rows 2736-2766)
+LIFT_PASSES = 3  # lift passes per push-out pass (a lift can bring another body point onto rock)
+MAX_LIFT_M = 0.3  # m, largest raise of an axle in one lift pass
 
 
 @njit(cache=True, nogil=True)
@@ -211,6 +220,7 @@ class RoverPhysics:
         self.world = world
         self.rocks = C.rock_field_for(world)
         self.state = BodyState(float(x), float(y), float(yaw) % 360.0)
+        self._supported = False  # the body rested on a rock top last step
         self._wheel_f = np.array(C.WHEEL_F_M)
         self._wheel_l = np.array(C.WHEEL_L_M)
         self._wheel_h = self._ground_at(*self._to_world(x, y, yaw, self._wheel_f, self._wheel_l))
@@ -262,7 +272,18 @@ class RoverPhysics:
         return 0.5 * (front + rear) - a * f_mid, a, b
 
     def contacts(self, x, y, yaw_deg, wheel_h=None):
-        """Overlaps of the body colliders at a pose: (push distance, unit push x, unit push y) per touching point."""
+        """Overlaps of the body colliders at a pose that push it sideways: (push distance, unit push x, unit push y)
+        per touching point (terrain, and rock whose contact normal is near horizontal)."""
+        return self._overlaps(x, y, yaw_deg, wheel_h)[0]
+
+    def _overlaps(self, x, y, yaw_deg, wheel_h=None):
+        """(walls, supports) of the body colliders at a pose.
+
+        walls: (push distance, unit push x, unit push y) per point to be pushed out sideways.
+        supports: None, or (f, lift, normal x, normal y, normal z) per body point resting on a rock top whose
+        contact normal (the collider's own, sim.contact.RockField.contact_normals) is within
+        SUPPORT_MAX_TILT_DEG of vertical: the body must rise `lift` metres there.
+        """
         if wheel_h is None:
             wheel_h = self._wheel_heights(x, y, yaw_deg)
         bp = C.BODY_POINTS
@@ -275,11 +296,12 @@ class RoverPhysics:
             if not _terrain_touches(float(x), float(y), math.cos(yaw), math.sin(yaw), bp, float(z0), float(a),
                                     float(b), w.terrain_height, float(w.size_m), float(w.terrain_cell_m)):
                 empty = np.zeros(0)
-                return empty, empty, empty
+                return (empty, empty, empty), None
         px, py = self._to_world(x, y, yaw_deg, bp[:, 0], bp[:, 1])
         plane = z0 + a * bp[:, 0] + b * bp[:, 1]
         bottom, top = plane + bp[:, 2], plane + bp[:, 3]
         depths, dxs, dys = [], [], []
+        supports = None
         terrain = np.asarray(self.world.height_at(px, py), dtype=np.float64)
         over = terrain - bottom
         hit = over > 0
@@ -297,22 +319,62 @@ class RoverPhysics:
             dys.append(-gy[ok] / g[ok])
         if near:
             rb, rt, rd, ex, ey = C.RockField.query(near, px, py)
-            hit = (rt > bottom) & (rb < top) & (rd > 0)
-            if hit.any():
-                depths.append(rd[hit])
-                dxs.append(ex[hit])
-                dys.append(ey[hit])
+            touch = (rt > bottom) & (rb < top)
+            if touch.any():
+                idx = np.nonzero(touch)[0]
+                nx, ny, nz = C.RockField.contact_normals(near, px[idx], py[idx], bottom[idx], rt[idx])
+                lift = rt[idx] - bottom[idx]
+                rest = (nz >= SUPPORT_MIN_NZ) & (rb[idx] < bottom[idx])  # the rock is under the plate, not over it
+                if rest.any():
+                    k = idx[rest]
+                    supports = (bp[k, 0], lift[rest], nx[rest], ny[rest], nz[rest])
+                wall = idx[~rest]
+                wall = wall[rd[wall] > 0]
+                if wall.size:
+                    depths.append(rd[wall])
+                    dxs.append(ex[wall])
+                    dys.append(ey[wall])
         if not depths:
             empty = np.zeros(0)
-            return empty, empty, empty
-        return np.concatenate(depths), np.concatenate(dxs), np.concatenate(dys)
+            return (empty, empty, empty), supports
+        return (np.concatenate(depths), np.concatenate(dxs), np.concatenate(dys)), supports
+
+    @staticmethod
+    def _lifted(wheel_h, supports):
+        """Wheel contact heights raised so that the plane through them carries the body over its rock supports:
+        a support ahead of the middle tilts the body about the rear axle (nose up), one behind it about the
+        front axle, as a rigid body on its far wheels would."""
+        f, lift = supports[0], supports[1] + CONTACT_SLOP_M
+        f_front, f_rear = C.WHEEL_F_M[0], C.WHEEL_F_M[2]
+        ahead = f >= 0.5 * (f_front + f_rear)
+        raise_front = np.where(ahead, lift * C.WHEELBASE_M / np.maximum(f - f_rear, 1e-3), 0.0)
+        raise_rear = np.where(ahead, 0.0, lift * C.WHEELBASE_M / np.maximum(f_front - f, 1e-3))
+        df = min(float(raise_front.max()), MAX_LIFT_M)
+        dr = min(float(raise_rear.max()), MAX_LIFT_M)
+        return wheel_h + np.array([df, df, dr, dr])
+
+    def _settle(self, x, y, yaw_deg, wheel_h):
+        """(wheel heights lifted onto the rock supports, walls at that attitude, supports met on the way)."""
+        met = None
+        for _ in range(LIFT_PASSES):
+            walls, supports = self._overlaps(x, y, yaw_deg, wheel_h)
+            if supports is None:
+                return wheel_h, walls, met
+            met = supports if met is None else tuple(np.concatenate([p, q]) for p, q in zip(met, supports))
+            wheel_h = self._lifted(wheel_h, supports)
+        walls, _ = self._overlaps(x, y, yaw_deg, wheel_h)
+        return wheel_h, walls, met
 
     def _resolve(self, x, y, yaw_deg):
-        """Push the body out of overlap (PhysX depenetration); returns (x, y, wheel heights, total push x, y)."""
+        """Lift the body onto rock tops it rests on, push it out of side overlap (PhysX depenetration along the
+        contact normal); returns (x, y, wheel heights, total push x, y, supports met or None)."""
         push_x = push_y = 0.0
         wheel_h = self._wheel_heights(x, y, yaw_deg)
+        supports = None
         for _ in range(CONTACT_ITERATIONS):
-            d, ex, ey = self.contacts(x, y, yaw_deg, wheel_h)
+            wheel_h, (d, ex, ey), met = self._settle(x, y, yaw_deg, wheel_h)
+            if met is not None:
+                supports = met
             if d.size == 0:
                 break
             vx, vy = float(np.sum(d * ex)), float(np.sum(d * ey))
@@ -326,7 +388,10 @@ class RoverPhysics:
             push_x += step * vx / n
             push_y += step * vy / n
             wheel_h = self._wheel_heights(x, y, yaw_deg)
-        return x, y, wheel_h, push_x, push_y
+        else:
+            if supports is not None:  # pushed on every pass: carry the body on its supports where it ended
+                wheel_h, _, met = self._settle(x, y, yaw_deg, wheel_h)
+        return x, y, wheel_h, push_x, push_y, supports
 
     def _update_terrain_attitude(self):
         """Pitch and roll of the plane the wheels stand on."""
@@ -385,9 +450,12 @@ class RoverPhysics:
         self._side_slide(dt, frozen)
         nx = s.x + (s.v * math.cos(mid) - s.v_side * math.sin(mid)) * dt
         ny = s.y + (s.v * math.sin(mid) + s.v_side * math.cos(mid)) * dt
-        nx, ny, self._wheel_h, push_x, push_y = self._resolve(nx, ny, new_yaw)
+        nx, ny, self._wheel_h, push_x, push_y, supports = self._resolve(nx, ny, new_yaw)
         if push_x or push_y:
             self._respond(push_x, push_y, new_yaw)
+        if supports is not None and not self._supported:
+            self._respond_support(supports, new_yaw)
+        self._supported = supports is not None
         s.x, s.y, s.yaw = nx, ny, new_yaw
         s.yaw_rate = rate
         s.accel = (s.v - v0) / dt
@@ -429,6 +497,20 @@ class RoverPhysics:
         s.impact_speed = impact
         if impact > REBOUND_MIN_SPEED:
             s.pitch_impact_rate += IMPACT_PITCH_GAIN * impact * along
+
+    def _respond_support(self, supports, yaw_deg: float):
+        """Velocity when the body first comes to rest on a rock top: the part of the speed along the contact
+        normal is removed (an inelastic contact), i.e. the speed times the squared horizontal share of the
+        normal along the heading; a near-vertical normal (a low rock top) costs almost nothing."""
+        s = self.state
+        hx, hy = math.cos(math.radians(yaw_deg)), math.sin(math.radians(yaw_deg))
+        along = hx * supports[2] + hy * supports[3]  # heading . normal (horizontal share, signed)
+        opposing = s.v * along
+        k = int(np.argmin(opposing))
+        if opposing[k] >= 0.0:  # moving off the slope
+            return
+        s.v -= SUPPORT_IMPULSE_SHARE * s.v * along[k] * along[k]
+        s.collided = True
 
     def _attitude_step(self, dt: float):
         s = self.state

@@ -317,12 +317,12 @@ def real_world(world_dir):
     return load_world("real")
 
 
-def _turn_and_back_out(world, x, y, yaw):
-    """From a pose: (largest clockwise yaw change during 2 s of turning in place, metres moved by 3 s of
+def _turn_and_back_out(world, x, y, yaw, turn_s=2.0):
+    """From a pose: (largest clockwise yaw change during turn_s of turning in place, metres moved by 3 s of
     reverse or of forward throttle, whichever gets farther)."""
     turn = P.RoverPhysics(world, x, y, yaw)
     turned = 0.0
-    for _ in range(int(2.0 / P.PHYSICS_DT)):
+    for _ in range(int(turn_s / P.PHYSICS_DT)):
         turn.step(P.Controls(0.0, 0.0, -15.0))
         turned = max(turned, (yaw - turn.state.yaw) % 360)
     moved = []
@@ -353,9 +353,9 @@ def test_rover_driven_into_a_trap_rock_can_turn_and_back_out(trap, real_world):
     assert hits > 0, "the drive should end against the rock"
     _run(body, P.Controls(0.0, 1.0, 0.0), 1.0)  # stop, as a client would
     s = body.state
-    turned, backed = _turn_and_back_out(real_world, s.x, s.y, s.yaw)
-    # it backs out; and turning in place starts (front wheels sweeping onto a low rock can tip it back
-    # so that it rolls faster than the 0.316 m/s of the simulator's turn-in-place rule)
+    turned, backed = _turn_and_back_out(real_world, s.x, s.y, s.yaw, turn_s=4.0)
+    # it backs out; and turning in place starts (a front wheel left on the rock tips it back so that it
+    # rolls off faster than the 0.316 m/s of the simulator's turn-in-place rule for up to ~2.5 s first)
     assert backed > 1.0
     assert turned > 15.0
 
@@ -416,9 +416,11 @@ def test_compiled_rock_query_equals_the_numpy_reference_bit_for_bit(real_world):
 def test_real_world_rocks_and_wall_slopes_stop_the_rover(real_world):
     world = real_world
     sx, sy = world.start_xy
-    body = P.RoverPhysics(world, sx, sy, 270.0)  # south: the low rocks 6-8.5 m from the start
+    # south: the low spheres 6-9 m from the start are ridden over on their contact normals (their tops are
+    # 0.06-0.17 m, the 0.40 m one is met on its flank), the 0.43 m rock ~13 m south stops the rover
+    body = P.RoverPhysics(world, sx, sy, 270.0)
     _run(body, P.Controls(1.0, 0.0, 0.0), 20.0)
-    assert abs(body.state.v) < 0.5 and 3.0 < sy - body.state.y < 9.0
+    assert abs(body.state.v) < 0.5 and 3.0 < sy - body.state.y < 14.0
     y_hit = body.state.y
     _run(body, P.Controls(-1.0, 0.0, 0.0), 3.0)
     assert body.state.y > y_hit + 1.0  # reversed out
@@ -468,3 +470,54 @@ def test_compiled_contact_paths_equal_numpy():
     assert sum(a[1].size > 0 for a in found_fast) > 5  # some poses really touch terrain or rock
     assert states_fast == states_ref
     assert sum(s[list(vars(body.state)).index("collided")] for s in states_fast) > 0  # the drives hit something
+
+
+def test_a_low_rock_under_the_flatbed_lip_lifts_the_body_instead_of_stopping_it(real_world):
+    """Seed 17's stuck spot (diag5): the flatbed's front lip overlapped a sphere of the cluster at (99.5, 77.6)
+    (top 0.167 m) by ~1 cm vertically and the rover stopped dead in 0.1 m, pinned for 8 s.  Along the
+    sphere's normal (centre -> contact, near vertical) that contact carries the body: it rides on."""
+    body = P.RoverPhysics(real_world, 99.25, 77.81, 210.0)
+    body.state.v = 1.2
+    pitches = []
+    for _ in range(int(2.0 / P.PHYSICS_DT)):
+        body.step(P.Controls(0.5, 0.0, 0.0))
+        pitches.append(body.state.pitch)
+    s = body.state
+    moved = math.hypot(s.x - 99.25, s.y - 77.81)
+    assert moved > 1.0 or (min(pitches) < -5.0 and moved > 0.3), (moved, min(pitches))
+
+
+def test_megalphian_ride_up_the_rock_cluster_pitches_nose_up_and_slides_to_a_stop(real_logs_dir, real_world):
+    """megalphian rows 2736-2766 (0-based): at 2.1 m/s the real rover met the cluster's 0.40 m sphere, pitched
+    20 deg nose up, slid to a stop over ~0.5 m without rebounding and rolled back.  The twin, open loop
+    with the logged commands: nose up >= 10 deg, a gradual stop (>= 0.25 s from 1 m/s to rest; the old wall
+    contact rebounded from 1.9 to -0.5 m/s in one step), stop within 0.6 m of the real one.
+    (SUPPORT_IMPULSE_SHARE was set on this event.)"""
+    from sim import physics_windows as W
+
+    path = real_logs_dir / "megalphian"
+    if not path.exists():
+        pytest.skip(f"megalphian log not found under {real_logs_dir}")
+    a = W.log_arrays(W.find_log(path))
+    i0 = 2736
+    assert math.hypot(a["x"][i0] - 99.13, a["y"][i0] - 78.52) < 0.05  # the row numbering is the expected one
+    real_stop = next(i for i in range(i0, i0 + 40) if a["speed"][i] <= 0.05)
+    i1 = int(np.searchsorted(a["t"], a["t"][i0] + 2.0))
+    body = P.RoverPhysics(real_world, a["x"][i0], a["y"][i0], a["yaw"][i0])
+    body.state.v = float(a["speed"][i0])
+    sim_t, stop, min_pitch, last_fast, stop_t = a["t"][i0], None, 0.0, None, None
+    for i in range(i0 + 1, i1 + 1):
+        c = P.Controls(a["throttle"][i - 1], a["brake"][i - 1], a["steer"][i - 1])
+        while sim_t < a["t"][i] - 1e-9:
+            body.step(c)
+            sim_t += P.PHYSICS_DT
+            s = body.state
+            min_pitch = min(min_pitch, s.pitch)
+            if stop is None and s.v > 1.0:
+                last_fast = sim_t
+            if stop is None and s.v <= 0.05:
+                stop, stop_t = (s.x, s.y), sim_t
+    assert min_pitch <= -10.0
+    assert stop is not None and last_fast is not None
+    assert stop_t - last_fast >= 0.25
+    assert math.hypot(stop[0] - a["x"][real_stop], stop[1] - a["y"][real_stop]) < 0.6
