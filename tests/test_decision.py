@@ -657,3 +657,14 @@ def test_a_faint_pocket_the_rover_got_stuck_in_is_done():
     assert r.nav.pocket_reached[row, col] and r.nav.path_goal is None
     exploration_plan.plan_explore(r, r.nav, s)
     assert r.nav.path_goal is None, "not chased again"
+
+
+def test_a_remembered_rock_under_the_rover_is_given_up_not_turned_to():
+    """Seed 16 at 15 fps: a rock remembered 0.1-0.4 m from the rover origin drew nine turns in place."""
+    r = make_rover(pos=(131.1, 115.3), yaw=190.0, t=67.0)
+    r.nav.rock_target = (131.08, 115.37)
+    r.nav.rock_since, r.nav.rock_seen_time = 60.0, 60.0  # last seen in the camera 7 s ago
+    decision.decision_step(r)
+    assert r.nav.rotate_heading is None and r.throttle == 0.0
+    assert r.nav.rock_target is None
+    assert any(abs(x - 131.08) < 0.01 for x, _y, _until in r.nav.rock_skip)

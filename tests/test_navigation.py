@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from navigation import astar, explore, grid, pursuit, reactive, stuck
+from navigation import astar, explore, grid, pursuit, reactive, stuck, turning
 
 
 def corridor_map():
@@ -630,3 +630,9 @@ def test_navigation_never_imports_decision():
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
                 [node.module or ""] if isinstance(node, ast.ImportFrom) else []
             assert not any(n == "decision" or n.startswith("decision.") for n in names), path.name
+
+
+def test_no_turn_in_place_toward_a_point_under_the_rover():
+    assert not turning.bearing_usable(0.3)
+    assert not turning.bearing_usable(float("nan"))
+    assert turning.bearing_usable(turning.TURN_POINT_MIN_M + 0.1)
