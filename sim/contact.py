@@ -109,6 +109,17 @@ class Shape:
         return float(v[:, 0].min()), float(v[:, 1].min()), float(v[:, 0].max()), float(v[:, 1].max())
 
 
+def wheel_plane(wheel_h):
+    """(height at the root, slope forward, slope left) of the plane four wheel contact heights (FL, FR, RL, RR)
+    define: the physics stands the body on it, the renderer lifts a logged pose by it."""
+    front, rear = 0.5 * (wheel_h[0] + wheel_h[1]), 0.5 * (wheel_h[2] + wheel_h[3])
+    left, right = 0.5 * (wheel_h[0] + wheel_h[2]), 0.5 * (wheel_h[1] + wheel_h[3])
+    a = (front - rear) / WHEELBASE_M
+    b = (left - right) / TRACK_M
+    f_mid = 0.5 * (WHEEL_F_M[0] + WHEEL_F_M[2])
+    return 0.5 * (front + rear) - a * f_mid, a, b
+
+
 def _unity_to_world(v) -> np.ndarray:
     """(Unity x, height, Unity z) -> (x, y, z) world axes."""
     v = np.asarray(v, dtype=np.float64).reshape(-1, 3)

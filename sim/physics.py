@@ -261,16 +261,6 @@ class RoverPhysics:
             h = np.where(found, top, h)
         return h
 
-    @staticmethod
-    def _plane(wheel_h):
-        """(height at the root, slope forward, slope left) of the plane the four wheels define."""
-        front, rear = 0.5 * (wheel_h[0] + wheel_h[1]), 0.5 * (wheel_h[2] + wheel_h[3])
-        left, right = 0.5 * (wheel_h[0] + wheel_h[2]), 0.5 * (wheel_h[1] + wheel_h[3])
-        a = (front - rear) / C.WHEELBASE_M
-        b = (left - right) / C.TRACK_M
-        f_mid = 0.5 * (C.WHEEL_F_M[0] + C.WHEEL_F_M[2])
-        return 0.5 * (front + rear) - a * f_mid, a, b
-
     def contacts(self, x, y, yaw_deg, wheel_h=None):
         """Overlaps of the body colliders at a pose that push it sideways: (push distance, unit push x, unit push y)
         per touching point (terrain, and rock whose contact normal is near horizontal)."""
@@ -287,7 +277,7 @@ class RoverPhysics:
         if wheel_h is None:
             wheel_h = self._wheel_heights(x, y, yaw_deg)
         bp = C.BODY_POINTS
-        z0, a, b = self._plane(wheel_h)
+        z0, a, b = C.wheel_plane(wheel_h)
         near = self.rocks.near(x, y, C.BODY_RADIUS_M + 0.1)
         if FAST_CONTACTS and not near and self._compiled_terrain():
             # open ground (the common step): one compiled test that no body point is under the terrain
@@ -390,7 +380,7 @@ class RoverPhysics:
             wheel_h = self._wheel_heights(x, y, yaw_deg)
         else:
             if supports is not None:  # pushed on every pass: carry the body on its supports where it ended
-                wheel_h, _, met = self._settle(x, y, yaw_deg, wheel_h)
+                wheel_h, _, _ = self._settle(x, y, yaw_deg, wheel_h)
         return x, y, wheel_h, push_x, push_y, supports
 
     def _update_terrain_attitude(self):

@@ -1004,7 +1004,7 @@ class Renderer:
 
         A pose without a height (a logged drive) used to put the camera at terrain height even with the rover
         on a boulder, inside the rock's columns; the real rover stands on its wheels. The wheels' support plane
-        is taken as the physics does (sim/physics.py `_plane`): the rock top under a wheel where one is within
+        is taken as the physics does (sim.contact.wheel_plane): the rock top under a wheel where one is within
         ROCK_LIFT_MAX_M above the terrain, else the terrain; the lift is that plane's height at the root minus the
         terrain-only plane's."""
         from sim import contact as C
@@ -1024,13 +1024,7 @@ class Renderer:
             on_rock = h + 0.01 < top <= h + ROCK_LIFT_MAX_M and bottom <= h + 0.01
             terrain.append(h)
             support.append(top if on_rock else h)
-
-        def plane_z(w):
-            front, rear = 0.5 * (w[0] + w[1]), 0.5 * (w[2] + w[3])
-            f_mid = 0.5 * (C.WHEEL_F_M[0] + C.WHEEL_F_M[2])
-            return 0.5 * (front + rear) - (front - rear) / C.WHEELBASE_M * f_mid
-
-        return max(0.0, plane_z(support) - plane_z(terrain))
+        return max(0.0, C.wheel_plane(support)[0] - C.wheel_plane(terrain)[0])
 
     def render(self, pose, samples=(), tracks=None) -> np.ndarray:
         """uint8 RGB (160, 320, 3) for pose (x, y, yaw, pitch, roll) in degrees.
