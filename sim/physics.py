@@ -159,8 +159,9 @@ class BodyState:
     yaw_rate: float = 0.0  # deg/s, last step
     accel: float = 0.0  # m/s^2, last step
     collided: bool = False  # last step hit something
-    fixed_turn_left: float = 0.0  # deg still to turn in a fixed_turn (signed, + = CCW)
-    fixed_turn_rate: float = 0.0  # deg/s of the running fixed_turn (signed)
+    fixed_turning: bool = False  # a fixed_turn is running (the body is kinematic)
+    fixed_turn_target_u: float = 0.0  # deg, Unity yaw (clockwise) the fixed_turn moves toward, any range
+    fixed_turn_speed: float = 0.0  # deg/s, angle / time as sent; negative never reaches the target
     pitch_impact: float = 0.0  # deg, transient pitch from hitting something (negative = nose up)
     pitch_impact_rate: float = 0.0
     impact_speed: float = 0.0  # m/s, approach speed of the last hit (0 when none this step)
@@ -176,6 +177,28 @@ class BodyState:
 
 
 # ------------------------------------------------------------------ helpers
+def unity_yaw(yaw_deg: float) -> float:
+    """Unity's clockwise yaw in [0, 360) for a telemetry yaw (counter-clockwise from +x)."""
+    return (90.0 - yaw_deg) % 360.0
+
+
+def delta_angle(current: float, target: float) -> float:
+    """Shortest signed difference target - current in (-180, 180], as Unity's Mathf.DeltaAngle."""
+    d = (target - current) % 360.0
+    return d - 360.0 if d > 180.0 else d
+
+
+def move_towards_angle(current: float, target: float, max_delta: float) -> float:
+    """Unity's Mathf.MoveTowardsAngle, including its behaviour for a negative max_delta (moves away)."""
+    d = delta_angle(current, target)
+    if -max_delta < d < max_delta:
+        return target
+    goal = current + d
+    if abs(goal - current) <= max_delta:
+        return goal
+    return current + (1.0 if goal - current >= 0.0 else -1.0) * max_delta
+
+
 def clamp_steer(cmd: float) -> float:
     return float(min(MAX_STEER_DEG, max(-MAX_STEER_DEG, cmd)))
 
@@ -392,17 +415,24 @@ class RoverPhysics:
         s.roll_terrain = math.degrees(math.atan2(right - left, C.TRACK_M))  # right side up +
 
     # -- commands ---------------------------------------------------------------
-    def start_fixed_turn(self, angle_deg: float, duration_s: float) -> bool:
-        """Kinematic turn in place; positive angle = clockwise (yaw decreases)."""
+    def start_fixed_turn(self, angle_deg: float, duration_s: float = 0.0) -> bool:
+        """Kinematic turn in place; positive angle = clockwise (yaw decreases).
+
+        As Unity's FixedTurn: speed = angle / time (time 0: the default angle / 45), so an angle and
+        a time of opposite signs give a negative speed that never reaches its target.
+        """
         s = self.state
-        if s.fixed_turn_left != 0.0 or abs(s.v) >= 0.01 or not math.isfinite(angle_deg):
+        if s.fixed_turning or abs(s.v) >= 0.01 or not math.isfinite(angle_deg):
             return False
-        if angle_deg == 0.0:
+        if not math.isfinite(duration_s):
+            return False
+        if duration_s == 0.0:
+            duration_s = angle_deg / TURN_IN_PLACE_RATE
+        if duration_s == 0.0:  # angle 0: Unity divides 0 by 0 and never moves; nothing to do here
             return True
-        if not (math.isfinite(duration_s) and duration_s > 0):
-            duration_s = abs(angle_deg) / TURN_IN_PLACE_RATE
-        s.fixed_turn_left = -float(angle_deg)
-        s.fixed_turn_rate = -float(angle_deg) / duration_s
+        s.fixed_turning = True
+        s.fixed_turn_target_u = unity_yaw(s.yaw) + float(angle_deg)
+        s.fixed_turn_speed = float(angle_deg) / duration_s
         return True
 
     def freeze(self):
@@ -421,15 +451,13 @@ class RoverPhysics:
         v0 = s.v
         if frozen:
             s.v, rate = 0.0, 0.0
-        elif s.fixed_turn_left != 0.0:
+        elif s.fixed_turning:
             s.v = 0.0
-            turn = s.fixed_turn_rate * dt
-            if abs(turn) >= abs(s.fixed_turn_left):
-                turn = s.fixed_turn_left
-            rate = turn / dt
-            s.fixed_turn_left -= turn
-            if abs(s.fixed_turn_left) < 1e-9:
-                s.fixed_turn_left = 0.0
+            now_u = unity_yaw(s.yaw)
+            new_u = move_towards_angle(now_u, s.fixed_turn_target_u, s.fixed_turn_speed * dt)
+            if new_u == s.fixed_turn_target_u:
+                s.fixed_turning = False
+            rate = -delta_angle(now_u, new_u) / dt  # Unity yaw is clockwise, telemetry yaw counter-clockwise
         else:
             s.reversing = throttle < 0  # megalphian: coasting backwards (throttle 0) is not doubled
             slope_sin = math.sin(math.radians(s.pitch_terrain))

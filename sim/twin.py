@@ -100,7 +100,7 @@ def parse_command(event, payload):
             raise CommandError("fixed_turn: missing required field 'angle'")
         angle = parse_sim_float(payload["angle"], "angle")
         t = payload.get("time")
-        duration = parse_sim_float(t, "time") if t not in (None, "") else abs(angle) / 45.0
+        duration = parse_sim_float(t, "time") if t not in (None, "") else 0.0  # 0: the default angle / 45 s
         return event, {"angle": angle, "time": duration}
     return event, {}
 
@@ -196,10 +196,10 @@ class RoverTwin:
         elif event == "fixed_turn":
             s = self.physics.state
             c = self.controls
-            if abs(s.v) < FIXED_TURN_STILL_SPEED and c.throttle == 0 and c.steer == 0:
+            if abs(s.v) < FIXED_TURN_STILL_SPEED and c.throttle == 0 and c.brake == 0 and c.steer == 0:
                 self.physics.start_fixed_turn(cmd["angle"], cmd["time"])
             else:
-                log.debug("fixed_turn ignored: rover moving or inputs nonzero")
+                log.debug("fixed_turn ignored: rover moving, or throttle/brake/steer nonzero")
 
     def advance_frame(self):
         """One lockstep frame of game time: physics steps, pickup arm, clock."""

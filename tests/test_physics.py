@@ -278,6 +278,22 @@ def test_fixed_turn_is_clockwise(flat_world):
     assert body.state.yaw == pytest.approx(0.0, abs=1e-6) or body.state.yaw == pytest.approx(360.0)
 
 
+def test_fixed_turn_default_time_is_45_deg_per_s_and_stops_on_target(flat_world):
+    body = P.RoverPhysics(flat_world, 100.0, 100.0, 10.0)
+    assert body.start_fixed_turn(-100.0, 0.0)  # counter-clockwise, time from the default rate
+    _run(body, P.Controls(), 1.0)
+    assert body.state.yaw == pytest.approx(55.0, abs=1e-6) and body.state.fixed_turning
+    _run(body, P.Controls(), 2.0)
+    assert body.state.yaw == pytest.approx(110.0, abs=1e-6) and not body.state.fixed_turning
+    assert not body.start_fixed_turn(float("nan"), 1.0)
+
+
+def test_move_towards_angle_matches_unity():
+    assert P.move_towards_angle(350.0, 370.0, 5.0) == 355.0  # across 0
+    assert P.move_towards_angle(10.0, 12.0, 5.0) == 12.0  # within reach: exactly the target
+    assert P.move_towards_angle(10.0, 20.0, -5.0) == 5.0  # negative speed moves away
+
+
 @pytest.mark.parametrize("name", ["megalphian", "royalejandro"])
 def test_two_second_windows_of_real_drives(name, real_logs_dir, world_dir, real_world):
     """From logged states, 2 s of logged commands land where the real rover did.

@@ -145,6 +145,32 @@ def test_fixed_turn_only_when_still_and_clockwise(twin):
     assert twin.truth.yaw == pytest.approx(yaw, abs=0.01)
 
 
+def test_fixed_turn_refused_while_the_brake_is_held(twin):
+    """Unity counts a nonzero brake as motor input, and FixedTurn wants none."""
+    twin.reset(3, start_yaw=90.0)
+    twin.step("data", _data(brake="1"))
+    twin.step("fixed_turn", {"angle": "45", "time": "1"})
+    assert float(_run(twin, 1.5)["yaw"]) == pytest.approx(90.0, abs=0.01)
+    twin.step("data", _data())
+    twin.step("fixed_turn", {"angle": "45", "time": "1"})
+    assert float(_run(twin, 1.5)["yaw"]) == pytest.approx(45.0, abs=0.01)
+
+
+def test_fixed_turn_ignores_data_while_it_runs_and_signs_need_to_match(twin):
+    twin.reset(3, start_yaw=90.0)
+    twin.step("fixed_turn", {"angle": "-90", "time": "-0.5"})  # counter-clockwise at 180 deg/s
+    tel = _run(twin, 0.2, "data", _data("1"))  # ignored while turning
+    assert float(tel["speed"]) == 0.0 and 90.0 < float(tel["yaw"]) < 180.0
+    twin.step("data", _data())
+    assert float(_run(twin, 0.6)["yaw"]) == pytest.approx(180.0, abs=0.01)
+    # angle and time of opposite signs: a negative speed that never reaches its target
+    twin.step("fixed_turn", {"angle": "-90", "time": "1"})
+    for _ in range(3):
+        yaw = float(_run(twin, 2.0)["yaw"])
+        assert abs(((yaw - 270.0) + 180.0) % 360.0 - 180.0) > 45.0
+    assert twin.physics.state.fixed_turning
+
+
 @pytest.mark.parametrize("event,payload", [
     ("data", {"throttle": 0.5, "steering_angle": "0"}),  # JSON number
     ("data", {"throttle": "abc", "steering_angle": "0"}),
