@@ -48,10 +48,11 @@ REFINE_ITERS = 4  # bisection steps locating a rock surface between two march sa
 COARSE_CELL_M = 1.0  # empty-space-skipping cell size, m
 BLOCK_CELLS = 8  # coarse cells per side of the second skipping level (sky and far rays), count
 COLUMN_SHARE_MAX_M = 120.0  # a column may average its neighbours' terrain hits nearer than this (0: never), m
-COLUMN_SHARE_RATIO = 0.06  # ... when their depths differ by at most this fraction
+COLUMN_SHARE_RATIO = 0.08  # ... when their depths differ by at most this fraction (0.06 before round 11)
 COLUMN_SHARE_LEVELS = 12  # ... and their colours by at most this in every channel, grey levels
-COLUMN_SHARE_TIERS = 2  # 1: odd columns may share; 2: so may columns 2 mod 4 (every 4th is marched), count
-COLUMN_SHARE_ROCK = True  # rock hits may be averaged too (both neighbours on rock, same depth and colour tests)
+COLUMN_SHARE_TIERS = 3  # 1: odd columns may share; 2: so may columns 2 mod 4; 3: so may columns 4 mod 8 (every 8th is marched; 2 before round 11), count
+COLUMN_SHARE_ROCK = True  # rock hits may be averaged too (both neighbours on rock, same colour test)
+COLUMN_SHARE_ROCK_RATIO = 0.15  # ... when their depths differ by at most this fraction (dark walls: far below the navigable threshold)
 UNDER_OVERHANG = 4  # flag added to a pixel's hit kind when its ray passed under rock (such hits are not shared)
 DARK_LUT_STEP_M = 0.02  # distance resolution of the distance-darkening table, m
 DARK_LUT_MAX_M = 200.0  # the table's reach (farther hits use its last entry), m
@@ -556,7 +557,8 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                    bmax, block_m, cell, coarse_m, origin,
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, underside_band_m, underside_ramp_m, world_size, dark_lut, dark_lut_step, share_depth_m, share_ratio,
-                   share_levels, share_rock, col_order, col_offset, shared_px):
+                   share_levels, share_rock, col_order, col_offset, shared_px,
+                   rock_ratio):
     """Column-wise raymarch into row-major (H, W, 3) image and (H, W) depth (module docstring).
 
     Free space is skipped per block_m block (above everything in it) and per coarse_m cell
@@ -616,7 +618,8 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                 # of marching it, ~17 % less time per frame; rock hits too: a further ~3.5 %)
                 d_l = depth[v, u - off]
                 d_r = depth[v, u + off]
-                if (d_l < share_depth_m and d_r < share_depth_m and abs(d_l - d_r) <= share_ratio * min(d_l, d_r)
+                ratio = share_ratio if kind_l == 1 else rock_ratio
+                if (d_l < share_depth_m and d_r < share_depth_m and abs(d_l - d_r) <= ratio * min(d_l, d_r)
                         and _colours_close(img, v, u - off, u + off, share_levels)):
                     for ch in range(3):
                         img[v, u, ch] = (np.uint16(img[v, u - off, ch]) + np.uint16(img[v, u + off, ch]) + 1) >> 1
@@ -626,7 +629,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                     shared_px[v, u] = 1
                     # the ray above restarts short of both neighbours' hits: the average may lie past a
                     # ridge this column's ray would have met first
-                    prev_s = (1.0 - share_ratio) * min(d_l, d_r) / table[3, v]
+                    prev_s = (1.0 - ratio) * min(d_l, d_r) / table[3, v]
                     continue
             hx = table[0, v]
             hy = table[1, v]
@@ -963,6 +966,7 @@ class Renderer:
         self.column_share_m = COLUMN_SHARE_MAX_M  # 0: every column marched (the reference image)
         self.share_floor_look = True  # False: the floor look is computed on the shared pixels too (the older image)
         self.share_rock = COLUMN_SHARE_ROCK  # False: only terrain hits are averaged from neighbouring columns
+        self.share_rock_ratio = COLUMN_SHARE_ROCK_RATIO  # depth test of averaged rock hits (fraction)
         self._col_order, self._col_offset = column_plan(IMAGE_W, COLUMN_SHARE_TIERS)
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
         self.last_shared = np.zeros((IMAGE_H, IMAGE_W), np.uint8)
@@ -1046,7 +1050,8 @@ class Renderer:
                        self.sky_rgb, self.far_rgb, UNDERSIDE_SHADE, UNDERSIDE_BAND_M,
                        UNDERSIDE_RAMP_M if self.smooth_underside else 0.0, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
-                       COLUMN_SHARE_LEVELS, self.share_rock, self._col_order, self._col_offset, shared_px)
+                       COLUMN_SHARE_LEVELS, self.share_rock, self._col_order, self._col_offset, shared_px,
+                       self.share_rock_ratio)
         if self._splat_mip is not None or self.backscatter:
             if self.share_floor_look and self.column_share_m > 0.0:
                 self._draw_floor_look(img, depth, origin, np.ascontiguousarray(rot), shared_px)

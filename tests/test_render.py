@@ -299,9 +299,10 @@ def test_odd_columns_sharing_their_neighbours_hits_draw_nearly_the_marched_frame
         shared_img = canyon_renderer.render(pose)
         marched_img = marched.render(pose)
         diff = np.abs(shared_img.astype(int) - marched_img.astype(int)).max(axis=2)
-        # 0.985-0.998 of pixels within 8 levels: the shadowless look no longer darkens far walls by distance
-        # (sim/shading.py), so their texture contrast, which sharing averages, is up to 1.8 times larger
-        assert (diff <= 8).mean() >= 0.98, pose
+        # 0.977-0.989 of pixels within 8 levels with the third sharing tier (0.988-0.996 with two; docs/twin-render.md
+        # round 11): the shadowless look no longer darkens far walls by distance (sim/shading.py), so their texture
+        # contrast, which sharing averages, is up to 1.8 times larger
+        assert (diff <= 8).mean() >= 0.97, pose
         assert (_navigable(shared_img) == _navigable(marched_img)).mean() >= 0.998, pose
         same_sky = np.isfinite(canyon_renderer.last_depth) == np.isfinite(marched.last_depth)
         assert same_sky.mean() >= 0.999, pose
@@ -328,7 +329,7 @@ def test_rock_hits_are_shared_between_columns_only_where_both_neighbours_are_roc
     assert added > 1000  # it does share rock (~1,300 pixels per real-world frame)
 
 
-@pytest.mark.parametrize("tiers", [1, 2])
+@pytest.mark.parametrize("tiers", [1, 2, 3])
 def test_column_plan_draws_every_column_once_after_the_neighbours_it_averages(tiers):
     from sim.render import column_plan
 
@@ -339,7 +340,7 @@ def test_column_plan_draws_every_column_once_after_the_neighbours_it_averages(ti
         if offset[u]:
             assert {u - offset[u], u + offset[u]} <= done, u
         done.add(u)
-    assert (offset == 0).sum() <= IMAGE_W // 2 ** tiers + 2  # only the last columns lack a right neighbour
+    assert (offset == 0).sum() <= IMAGE_W // 2 ** tiers + tiers  # only the last column of each tier lacks a right neighbour
 
 
 # poses of the logged test_dataset frames 135, 143 and 151, looking at the overhang at (106-110, 100)
