@@ -5,8 +5,8 @@ has cast_shadows off) is baked once into 0.1 m rasters (solid top, overhang gap,
 column-wise heightfield raymarch (numba): each image column is walked from the
 bottom row up, every ray resuming at the horizontal distance where the ray below
 hit (exact for a level camera, a few-pixel approximation under pitch/roll), with
-1 m max-height cells skipped in one jump. Every 4th column is marched first; the columns between
-take the average of their two neighbours (2 apart, then 1) wherever both hit open terrain (or both rock)
+1 m max-height cells skipped in one jump. Every 8th column is marched first; the columns between
+take the average of their two neighbours (4 apart, then 2, then 1) wherever both hit open terrain (or both rock)
 at nearly one depth and colour (column coherence), and march the rest. Sample rocks are small shaded ellipsoids
 drawn over it with a depth test.
 
@@ -888,7 +888,8 @@ def _kernel_rasters(ground, slab_lo, slab_hi, colour_ground) -> dict:
 def column_plan(width: int, tiers: int):
     """Order in which the kernel draws the image columns, and per column the distance of the two
     neighbours it may average (0: marched). tiers 1: even columns marched, odd ones between them;
-    tiers 2: every 4th column marched, then the ones two apart, then the odd ones."""
+    tiers 2: every 4th column marched, then the ones two apart, then the odd ones; tiers 3: every 8th, then
+    the ones four apart, and so on."""
     stride = 1 << tiers
     offset = np.zeros(width, np.int64)
     order = [u for u in range(0, width, stride)]
