@@ -96,6 +96,22 @@ def command_payload(throttle: float, brake: float, steer: float) -> Dict[str, st
             "steering_angle": format_number(steer)}
 
 
+def fixed_turn_reply(rover, enabled: bool):
+    """("fixed_turn", payload) when decision asked for one this frame (rover.fixed_turn, degrees CCW),
+    else None; the request is consumed either way.  Not sent with fixed turns off (the decision then
+    sees the yaw not move and steers the turn) or for an angle that cannot be sent."""
+    from navigation import fixed_turn
+
+    turn, rover.fixed_turn = getattr(rover, "fixed_turn", None), None
+    if turn is None or not enabled:
+        return None
+    try:
+        return "fixed_turn", fixed_turn.payload(turn)
+    except (TypeError, ValueError):
+        log.warning("fixed turn of %r deg cannot be sent; data instead", turn)
+        return None
+
+
 def _default_steps():
     """The real perception and decision modules (imported late so that a
     missing module surfaces as one clear import error at client start)."""
@@ -120,12 +136,14 @@ class AutonomyClient:
     """
 
     def __init__(self, ground_truth=None, clock: Callable[[], float] = time.monotonic,
-                 insets: bool = True, perception_step=None, decision_step=None, home_by_s=None):
+                 insets: bool = True, perception_step=None, decision_step=None, home_by_s=None,
+                 fixed_turns: bool = True):
         if perception_step is None or decision_step is None:
             real_perception, real_decision = _default_steps()
             perception_step = perception_step or real_perception
             decision_step = decision_step or real_decision
         self.home_by_s = home_by_s  # return deadline handed to every mission's RoverState, s or None
+        self.fixed_turns = bool(fixed_turns)  # turn in place with the simulator's fixed_turn (False: steer, e.g. the gym)
         self.rover = self._fresh_rover(ground_truth)
         self.clock = clock
         self.insets = insets
@@ -161,6 +179,7 @@ class AutonomyClient:
     def _fresh_rover(self, ground_truth):
         rover = RoverState(ground_truth=ground_truth)
         rover.home_by_s = self.home_by_s
+        rover.fixed_turns = self.fixed_turns
         return rover
 
     def _safe_stop(self):
@@ -220,7 +239,7 @@ class AutonomyClient:
 
     # -- the frame ------------------------------------------------------------
     def handle_telemetry(self, data) -> Tuple[str, Dict[str, str]]:
-        """One reply: ("data", command+insets), ("pickup", {}) or ("manual", {})."""
+        """One reply: ("data", command+insets), ("pickup", {}), ("fixed_turn", {"angle", "time"}) or ("manual", {})."""
         t0 = time.perf_counter()
         timings = {k: 0.0 for k in STAGES}
         self.last_timings = timings
@@ -261,6 +280,7 @@ class AutonomyClient:
         t = time.perf_counter()
         try:
             rover.send_pickup = False
+            rover.fixed_turn = None
             self.perception_step(rover)
             timings["perception"] = (time.perf_counter() - t) * 1e3
             t = time.perf_counter()
@@ -270,6 +290,7 @@ class AutonomyClient:
             self.step_errors += 1
             self.warn("step", "perception/decision raised; safe stop", exc_info=True)
             rover.send_pickup = False
+            rover.fixed_turn = None
             return self._safe_stop()
 
         want_pickup = bool(rover.send_pickup)
@@ -277,6 +298,9 @@ class AutonomyClient:
         if want_pickup and pickup_allowed(rover):
             rover.pickup_sent_at = rover.total_time
             return "pickup", {}
+        turn = fixed_turn_reply(rover, self.fixed_turns)
+        if turn is not None:
+            return turn
         if want_pickup:
             self.warn("pickup-gate", "pickup vetoed (near=%s, speed=%.3f, picking_up=%s)",
                       rover.near_sample, rover.vel, rover.picking_up, level=logging.INFO)

@@ -43,8 +43,8 @@ from typing import Optional
 import numpy as np
 
 import perception
-from navigation import (approach, exploration_plan, explore, grid, paths, predict, pursuit, reactive, rock_choice,
-                        search_plan, stuck, turning)
+from navigation import (approach, exploration_plan, explore, fixed_turn, grid, paths, predict, pursuit, reactive,
+                        rock_choice, search_plan, stuck, turning)
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +137,7 @@ class Inputs:
     picking_up: bool
     samples_remaining: object  # int or None
     home_by: Optional[float] = None  # return deadline set for this mission (RoverState.home_by_s), s; None: the default
+    fixed_turns: bool = False  # the link can send the simulator's fixed_turn (RoverState.fixed_turns)
     reach: Optional[np.ndarray] = field(default=None, repr=False, compare=False)  # _frame_reach's, once computed
 
 
@@ -146,6 +147,7 @@ class Command:
     brake: float = 0.0
     steer: float = 0.0
     pickup: bool = False
+    fixed_turn: Optional[float] = None  # send the simulator's fixed_turn for this many degrees (CCW +) instead of data
 
 
 class NavMemory:
@@ -178,6 +180,12 @@ class NavMemory:
         self.pocket_goal = None  # bool map of the faint pocket the current frontier goal drives into (explore.enterable_pockets), or None
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
+        self.fixed = None  # the fixed_turn.FixedTurn in flight, or None
+        self.fixed_steer = False  # this turn in place is steered: its fixed turn was refused
+        self.fixed_refusals = 0  # fixed turns refused in a row (fixed_turn.FIXED_TURN_MAX_REFUSALS: stop asking)
+        self.fixed_sent = 0  # fixed turns sent this mission
+        self.fixed_sent_deg = 0.0  # ...and their degrees in all
+        self.fixed_refused = 0  # fixed turns the simulator refused this mission (each then steered)
         # planning
         self.path_xy = np.zeros((0, 2))
         self.path_idx = 0
@@ -303,6 +311,7 @@ def _read_inputs(rover):
         rock_angles=rock_a, rock_dists=rock_d,
         near_sample=bool(getattr(rover, "near_sample", False)), picking_up=bool(getattr(rover, "picking_up", False)),
         samples_remaining=remaining, home_by=_given_home_by(rover),
+        fixed_turns=bool(getattr(rover, "fixed_turns", False)),
     )
 
 
@@ -394,6 +403,8 @@ def _apply(rover, nav, mode, cmd, t):
     steer = pursuit.clamp(_finite(cmd.steer), -STEER_LIMIT_DEG, STEER_LIMIT_DEG)
     rover.throttle, rover.brake, rover.steer = throttle, brake, steer
     rover.send_pickup = bool(cmd.pickup)
+    turn = cmd.fixed_turn
+    rover.fixed_turn = float(turn) if turn is not None and math.isfinite(turn) and turn != 0.0 else None
     if mode != nav.mode:
         log.debug("mode %s -> %s at t=%.1f", nav.mode, mode, _finite(t))
         nav.mode = mode
@@ -401,7 +412,7 @@ def _apply(rover, nav, mode, cmd, t):
     rover.mode = mode
     rover.target = _display_target(nav)
     rover.mission_complete = bool(nav.done)
-    nav.last_cmd = Command(throttle, brake, steer, bool(cmd.pickup))
+    nav.last_cmd = Command(throttle, brake, steer, bool(cmd.pickup), rover.fixed_turn)
 
 
 def _display_target(nav):
@@ -419,6 +430,10 @@ def _select_and_run(rover, nav, s):
     """Highest-priority applicable mode wins; each mode is one function below."""
     if s.pos is None:
         return "stop", Command(0.0, BRAKE_STOP if abs(s.vel) > STOPPED_SPEED_MPS else 0.0, 0.0)
+    if nav.fixed is not None:
+        cmd = _fixed_turn_step(nav, s)  # the simulator ignores data commands while it turns: wait for the yaw
+        if cmd is not None:
+            return "stop", cmd
     if nav.mode in ("sample", "pickup", "stuck"):
         paths.reset_goal_progress(nav, s)  # time spent on a rock or a recovery is no stall of the frontier goal
     if s.picking_up or s.near_sample:
@@ -650,24 +665,91 @@ def mode_stuck(nav, s):
 def mode_stop(nav, s):
     """Brake, then turn in place toward nav.rotate_heading; None when aligned (or timed out).
 
-    The error is judged where the heading will be when this command acts (latency lead).
+    With the simulator's fixed_turn (s.fixed_turns) the turn is one kinematic turn that stops
+    exactly at the heading (_fixed_turn_angle); otherwise, or when it was refused, steered at
+    full lock, the error judged where the heading will be when this command acts (latency lead).
     """
+    turn = _fixed_turn_angle(nav, s)
+    if turn is not None:
+        if abs(turn) <= ROTATE_EXIT_DEG:
+            return _end_rotation(nav, s)
+        if abs(turn) >= fixed_turn.FIXED_TURN_MIN_DEG:
+            return _begin_fixed_turn(nav, s, turn)
     err = predict.heading_error_at_lead(nav.rotate_heading, s.yaw, nav.lead.yaw_rate_dps, nav.lead.lead_s)
     if nav.rotate_dir is not None and err * nav.rotate_dir < 0 and abs(err) > SWEEP_COMMIT_DEG:
         if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
             return Command(0.0, BRAKE_STOP, 0.0)
         return Command(0.0, 0.0, nav.rotate_dir * STEER_LIMIT_DEG)  # the long way round, until past the far side
     if abs(err) <= ROTATE_EXIT_DEG or s.t - nav.rotate_since > ROTATE_TIMEOUT_S:
-        if nav.rotate_via is not None:  # facing the unsearched wall feet: hold still and let a rock there be chosen
-            nav.glance_hold_until = s.t + GLANCE_HOLD_S
-        nav.rotate_heading = nav.rotate_via = None
-        return None
+        return _end_rotation(nav, s)
     if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
         return Command(0.0, BRAKE_STOP, 0.0)
     steer = STEER_LIMIT_DEG if err > 0 else -STEER_LIMIT_DEG
     if abs(err) < 20.0:
         steer *= 0.6  # soften the last degrees to limit overshoot at 45 deg/s
     return Command(0.0, 0.0, steer)
+
+
+def _end_rotation(nav, s):
+    """The turn in place is over: None (the caller picks the next mode)."""
+    if nav.rotate_via is not None:  # facing the unsearched wall feet: hold still and let a rock there be chosen
+        nav.glance_hold_until = s.t + GLANCE_HOLD_S
+    nav.rotate_heading = nav.rotate_via = None
+    return None
+
+
+def _fixed_turn_angle(nav, s):
+    """The whole turn still wanted, degrees CCW (the long way round when the sweep asks for it), when
+    this turn is to be a fixed turn; None when it is to be steered (no fixed turns on this link, this
+    one was refused, the simulator refused them again and again, or the turn timed out)."""
+    if (not s.fixed_turns or nav.fixed_steer or nav.fixed_refusals >= fixed_turn.FIXED_TURN_MAX_REFUSALS
+            or s.t - nav.rotate_since > ROTATE_TIMEOUT_S):
+        return None
+    if not fixed_turn.still(s.vel) and s.t - nav.rotate_since > fixed_turn.FIXED_TURN_STOP_WAIT_S:
+        nav.fixed_steer = True  # not coming to a standstill (rocking on a rock): steer as before
+        return None
+    err = predict.wrap_deg(nav.rotate_heading - s.yaw)
+    if nav.rotate_dir is not None and err * nav.rotate_dir < 0 and abs(err) > SWEEP_COMMIT_DEG:
+        err += 360.0 * nav.rotate_dir  # the long way round, sweeping the camera over unsearched wall feet
+    return err
+
+
+def _begin_fixed_turn(nav, s, turn):
+    """Brake to the standstill the simulator needs, then release the brake for one frame (it refuses
+    a fixed turn while the last data command brakes); the next frame sends it (_fixed_turn_step)."""
+    if not fixed_turn.still(s.vel):
+        return Command(0.0, BRAKE_STOP, 0.0)
+    nav.fixed = fixed_turn.FixedTurn(ccw_deg=float(turn), released_at=s.t)
+    return Command(0.0, 0.0, 0.0)
+
+
+def _fixed_turn_step(nav, s):
+    """Send the released fixed turn, then hold data 0/0/0 until the yaw has arrived; None once it is
+    over (arrived, overdue, refused: then this turn is steered) or the rover rolled off the standstill."""
+    ft = nav.fixed
+    latency = 2.0 * nav.lead.interval_s  # a reply acts at the next frame and shows in the one after
+    if ft.sent_at is None:
+        if not fixed_turn.still(s.vel):
+            nav.fixed = None
+            return None
+        ft.sent_at, ft.last_yaw = s.t, s.yaw
+        nav.fixed_sent += 1
+        nav.fixed_sent_deg += abs(ft.ccw_deg)
+        log.debug("fixed turn %+.0f deg at t=%.1f", ft.ccw_deg, s.t)
+        return Command(0.0, 0.0, 0.0, fixed_turn=ft.ccw_deg)
+    ft.observe(s.yaw)
+    if ft.arrived() or ft.overdue(s.t, latency):
+        nav.fixed = None
+        nav.fixed_refusals = 0
+        return None
+    if ft.refused(s.t, latency):
+        nav.fixed = None
+        nav.fixed_refusals += 1
+        nav.fixed_refused += 1
+        nav.fixed_steer = True
+        log.info("fixed turn refused at t=%.1f (%d in a row): steering this turn", s.t, nav.fixed_refusals)
+        return None
+    return Command(0.0, 0.0, 0.0)
 
 
 def mode_done(nav, s):
@@ -890,6 +972,7 @@ def _start_rotation(nav, s, heading_deg, reason):
     nav.rotate_since = s.t
     nav.rotate_dir = None
     nav.rotate_via = None
+    nav.fixed_steer = False
     if reason in SWEEP_REASONS and search_plan.samples_missing(s) and nav.unsearched is not None:
         way = explore.sweep_direction(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
         if way * predict.wrap_deg(nav.rotate_heading - s.yaw) < 0:

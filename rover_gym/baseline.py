@@ -4,7 +4,9 @@
 the observation (numbers with the simulator's formatting, the frame as a
 lossless PNG of the pixels the env observed) and runs `autonomy.AutonomyClient`
 on it, so the baseline drives exactly as it does on the wire and in
-`sim.mission` (tests/test_gym.py checks the trajectories match frame for frame).
+`sim.mission` (tests/test_gym.py checks the trajectories match frame for frame), except that
+the action space has no `fixed_turn`: the baseline turns in place by steering, as the client
+does on a link whose fixed turns are off.
 """
 from __future__ import annotations
 
@@ -81,8 +83,9 @@ class AutonomyPolicy:
 
         from autonomy import AutonomyClient
 
+        # the action space has no fixed_turn: the baseline steers its turns in place (fixed_turns=False)
         self.client = AutonomyClient(ground_truth=self.ground_truth, insets=False, home_by_s=self.home_by_s,
-                                     clock=self.clock or time.monotonic)
+                                     clock=self.clock or time.monotonic, fixed_turns=False)
 
     def __call__(self, obs) -> np.ndarray:
         tel = telemetry_from_obs(obs, sim_time_field=self.clock is None)

@@ -82,6 +82,9 @@ class MissionResult:
     time_limit_s: float | None = None  # the mission's time limit (--time-limit), simulated s
     code_version: str | None = None  # git commit of the code that ran (+ "-dirty" with local changes)
     render_fps: float | None = None  # wire, unity timing: render frames the twin managed per second (falls under load)
+    fixed_turns: int | None = None  # in-process: fixed_turn commands the client sent
+    fixed_turn_deg: float | None = None  # ...and their degrees in all
+    fixed_turns_refused: int | None = None  # ...of which the client saw the simulator refuse (and steered instead)
 
     def as_dict(self):
         return {k: nan_to_none(v) for k, v in asdict(self).items()}
@@ -152,6 +155,22 @@ def _video_frame(rgb, worldmap):
     return np.ascontiguousarray(np.hstack([cam, mp]))
 
 
+class FixedTurnCount:
+    """The fixed_turn commands a client sent: how many, and their degrees in all."""
+
+    def __init__(self):
+        self.count, self.degrees = 0, 0.0
+
+    def add(self, event, payload) -> None:
+        if event != "fixed_turn":
+            return
+        self.count += 1
+        try:
+            self.degrees += abs(float(payload["angle"]))
+        except (TypeError, ValueError, KeyError):
+            pass
+
+
 def telemetry_period_s(timing: Timing) -> float:
     """Simulated seconds between telemetries with a client that answers each in reply_delay_s."""
     if not timing.unity:
@@ -187,12 +206,14 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
     track = TruthTrack(twin)
     end_reason, completed = "time limit", False
     bar = progress_bar(time_limit, progress, f"seed {seed}")
+    turns = FixedTurnCount()
     t_wall = time.perf_counter()
     try:
         while twin.sim_time < time_limit:
             if recorder is not None:
                 recorder.write_twin(twin)
             event, payload = client.handle_telemetry(tel)
+            turns.add(event, payload)
             for watcher in watchers:
                 watcher.observe(client, event)
             try:
@@ -224,6 +245,8 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
                 end_reason=end_reason, completed=completed,
                 worldmap=np.array(client.rover.worldmap, copy=True),
                 rejected=twin.rejected_commands, timing=timing,
+                fixed_turns=turns.count, fixed_turn_deg=round(turns.degrees, 1),
+                fixed_turns_refused=getattr(getattr(client.rover, "nav", None), "fixed_refused", None),
                 reply_delay_ms=round(1e3 * statistics.median(loop.delays), 1) if loop.delays else None)
 
 
@@ -258,6 +281,8 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
         shadows=bool(world.cast_shadows), **timing.describe(),
         telemetry_hz=round(1.0 / period, 2) if period else None,
         reply_delay_ms=summary.get("reply_delay_ms"), round_trip_ms=summary.get("round_trip_ms"),
+        fixed_turns=summary.get("fixed_turns"), fixed_turn_deg=summary.get("fixed_turn_deg"),
+        fixed_turns_refused=summary.get("fixed_turns_refused"),
         render_fps=round(summary["render_frames"] / tr.sim_time, 1) if summary.get("render_frames") and tr.sim_time
         else None)
 

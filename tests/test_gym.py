@@ -124,7 +124,7 @@ def test_baseline_policy_drives_exactly_like_the_client_on_the_twin(timing):
         gym_path.append(env.twin.pose())
 
     loop = TwinLoop(RoverTwin(env.world, seed=3), env.timing)
-    client = AutonomyClient(ground_truth=env.world.nav_truth, insets=False, clock=loop.clock)
+    client = AutonomyClient(ground_truth=env.world.nav_truth, insets=False, clock=loop.clock, fixed_turns=False)
     tel = loop.reset(3)
     twin_path = []
     for _ in range(frames):
