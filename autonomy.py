@@ -97,7 +97,7 @@ def command_payload(throttle: float, brake: float, steer: float) -> Dict[str, st
 
 
 def fixed_turn_reply(rover, enabled: bool):
-    """("fixed_turn", payload) when decision asked for one this frame (rover.fixed_turn, degrees CCW),
+    """("fixed_turn", payload) when decision asked for one this frame (rover.fixed_turn: degrees CCW, deg/s),
     else None; the request is consumed either way.  Not sent with fixed turns off (the decision then
     sees the yaw not move and steers the turn) or for an angle that cannot be sent."""
     from navigation import fixed_turn
@@ -106,7 +106,8 @@ def fixed_turn_reply(rover, enabled: bool):
     if turn is None or not enabled:
         return None
     try:
-        return "fixed_turn", fixed_turn.payload(turn)
+        angle, rate = turn
+        return "fixed_turn", fixed_turn.payload(angle, rate)
     except (TypeError, ValueError):
         log.warning("fixed turn of %r deg cannot be sent; data instead", turn)
         return None

@@ -147,7 +147,7 @@ class Command:
     brake: float = 0.0
     steer: float = 0.0
     pickup: bool = False
-    fixed_turn: Optional[float] = None  # send the simulator's fixed_turn for this many degrees (CCW +) instead of data
+    fixed_turn: Optional[tuple] = None  # send the simulator's fixed_turn instead of data: (degrees CCW +, deg/s)
 
 
 class NavMemory:
@@ -403,8 +403,7 @@ def _apply(rover, nav, mode, cmd, t):
     steer = pursuit.clamp(_finite(cmd.steer), -STEER_LIMIT_DEG, STEER_LIMIT_DEG)
     rover.throttle, rover.brake, rover.steer = throttle, brake, steer
     rover.send_pickup = bool(cmd.pickup)
-    turn = cmd.fixed_turn
-    rover.fixed_turn = float(turn) if turn is not None and math.isfinite(turn) and turn != 0.0 else None
+    rover.fixed_turn = cmd.fixed_turn
     if mode != nav.mode:
         log.debug("mode %s -> %s at t=%.1f", nav.mode, mode, _finite(t))
         nav.mode = mode
@@ -669,12 +668,13 @@ def mode_stop(nav, s):
     exactly at the heading (_fixed_turn_angle); otherwise, or when it was refused, steered at
     full lock, the error judged where the heading will be when this command acts (latency lead).
     """
-    turn = _fixed_turn_angle(nav, s)
+    turn, sweep = _fixed_turn_angle(nav, s)
     if turn is not None:
         if abs(turn) <= ROTATE_EXIT_DEG:
             return _end_rotation(nav, s)
         if abs(turn) >= fixed_turn.FIXED_TURN_MIN_DEG:
-            return _begin_fixed_turn(nav, s, turn)
+            rate = fixed_turn.FIXED_TURN_SWEEP_RATE_DPS if sweep else fixed_turn.FIXED_TURN_RATE_DPS
+            return _begin_fixed_turn(nav, s, turn, rate)
     err = predict.heading_error_at_lead(nav.rotate_heading, s.yaw, nav.lead.yaw_rate_dps, nav.lead.lead_s)
     if nav.rotate_dir is not None and err * nav.rotate_dir < 0 and abs(err) > SWEEP_COMMIT_DEG:
         if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
@@ -699,27 +699,28 @@ def _end_rotation(nav, s):
 
 
 def _fixed_turn_angle(nav, s):
-    """The whole turn still wanted, degrees CCW (the long way round when the sweep asks for it), when
-    this turn is to be a fixed turn; None when it is to be steered (no fixed turns on this link, this
-    one was refused, the simulator refused them again and again, or the turn timed out)."""
+    """(turn, sweep): the whole turn still wanted, degrees CCW, and whether it goes the long way round
+    to sweep the camera over unsearched wall feet, when this turn is to be a fixed turn; (None, False)
+    when it is to be steered (no fixed turns on this link, this one was refused, the simulator refused
+    them again and again, or the turn timed out)."""
     if (not s.fixed_turns or nav.fixed_steer or nav.fixed_refusals >= fixed_turn.FIXED_TURN_MAX_REFUSALS
             or s.t - nav.rotate_since > ROTATE_TIMEOUT_S):
-        return None
+        return None, False
     if not fixed_turn.still(s.vel) and s.t - nav.rotate_since > fixed_turn.FIXED_TURN_STOP_WAIT_S:
         nav.fixed_steer = True  # not coming to a standstill (rocking on a rock): steer as before
-        return None
+        return None, False
     err = predict.wrap_deg(nav.rotate_heading - s.yaw)
     if nav.rotate_dir is not None and err * nav.rotate_dir < 0 and abs(err) > SWEEP_COMMIT_DEG:
-        err += 360.0 * nav.rotate_dir  # the long way round, sweeping the camera over unsearched wall feet
-    return err
+        return err + 360.0 * nav.rotate_dir, True
+    return err, False
 
 
-def _begin_fixed_turn(nav, s, turn):
+def _begin_fixed_turn(nav, s, turn, rate_dps):
     """Brake to the standstill the simulator needs, then release the brake for one frame (it refuses
     a fixed turn while the last data command brakes); the next frame sends it (_fixed_turn_step)."""
     if not fixed_turn.still(s.vel):
         return Command(0.0, BRAKE_STOP, 0.0)
-    nav.fixed = fixed_turn.FixedTurn(ccw_deg=float(turn), released_at=s.t)
+    nav.fixed = fixed_turn.FixedTurn(ccw_deg=float(turn), released_at=s.t, rate_dps=rate_dps)
     return Command(0.0, 0.0, 0.0)
 
 
@@ -736,7 +737,7 @@ def _fixed_turn_step(nav, s):
         nav.fixed_sent += 1
         nav.fixed_sent_deg += abs(ft.ccw_deg)
         log.debug("fixed turn %+.0f deg at t=%.1f", ft.ccw_deg, s.t)
-        return Command(0.0, 0.0, 0.0, fixed_turn=ft.ccw_deg)
+        return Command(0.0, 0.0, 0.0, fixed_turn=(ft.ccw_deg, ft.rate_dps))
     ft.observe(s.yaw)
     if ft.arrived() or ft.overdue(s.t, latency):
         nav.fixed = None

@@ -54,7 +54,7 @@ class RoverState:
         self.steer = 0.0  # command, degrees, clamped to +-15, positive = left
         self.send_pickup = False  # ask the simulator to pick up this frame
         self.fixed_turns = False  # the link can send the simulator's fixed_turn (AutonomyClient sets it)
-        self.fixed_turn = None  # send fixed_turn this frame instead of data: degrees, CCW + (navigation.fixed_turn)
+        self.fixed_turn = None  # send fixed_turn this frame instead of data: (degrees CCW +, deg/s) (navigation.fixed_turn)
         self.pickup_sent_at = None  # total_time of the last pickup request
         self.mission_complete = False  # all collected and home
         self.home_by_s = None  # head home so as to arrive by this mission time, s (None: decision.HOME_BY_S)

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Dict, Optional
 
 FIXED_TURN_RATE_DPS = 90.0  # turn speed asked of the simulator (time = angle / this), deg/s
+FIXED_TURN_SWEEP_RATE_DPS = 45.0  # ...for a turn the long way round that sweeps the camera over unsearched wall feet (a rock there needs frames to be remembered), deg/s
 FIXED_TURN_MIN_DEG = 15.0  # turns smaller than this are steered (release + send frames cost more than they save), degrees
 FIXED_TURN_STILL_MPS = 0.005  # |telemetry speed| below this counts as the standstill the simulator needs (< 0.01), m/s
 FIXED_TURN_STOP_WAIT_S = 2.0  # braking this long without reaching that standstill: steer this turn instead, s
@@ -39,14 +40,16 @@ def wrap_deg(a: float) -> float:
     return (float(a) + 180.0) % 360.0 - 180.0
 
 
-def duration_s(ccw_deg: float, rate_dps: float = FIXED_TURN_RATE_DPS) -> float:
-    """Seconds the simulator takes for a turn of this many degrees at rate_dps (always > 0)."""
-    return abs(float(ccw_deg)) / rate_dps
+def duration_s(ccw_deg: float, rate_dps: Optional[float] = None) -> float:
+    """Seconds the simulator takes for a turn of this many degrees at rate_dps (default FIXED_TURN_RATE_DPS)."""
+    return abs(float(ccw_deg)) / (FIXED_TURN_RATE_DPS if rate_dps is None else rate_dps)
 
 
-def payload(ccw_deg: float, rate_dps: float = FIXED_TURN_RATE_DPS) -> Dict[str, str]:
-    """The `fixed_turn` payload for a CCW turn (client convention): JSON strings (a JSON number
-    stalls the simulator), angle clockwise-positive, time with the angle's sign."""
+def payload(ccw_deg: float, rate_dps: Optional[float] = None) -> Dict[str, str]:
+    """The `fixed_turn` payload for a CCW turn (client convention) at rate_dps (default
+    FIXED_TURN_RATE_DPS): JSON strings (a JSON number stalls the simulator), angle
+    clockwise-positive, time with the angle's sign."""
+    rate_dps = FIXED_TURN_RATE_DPS if rate_dps is None else rate_dps
     cw = -float(ccw_deg)
     if not math.isfinite(cw) or cw == 0.0 or not (math.isfinite(rate_dps) and rate_dps > 0):
         raise ValueError(f"no fixed turn for angle {ccw_deg!r} at {rate_dps!r} deg/s")
@@ -69,6 +72,7 @@ class FixedTurn:
 
     ccw_deg: float  # the whole turn, CCW +, may exceed 180 (the long way round)
     released_at: float  # client clock when the brake was released, s
+    rate_dps: float = FIXED_TURN_RATE_DPS  # the turn's speed, deg/s
     sent_at: Optional[float] = None  # client clock when the fixed_turn was sent, s (None: not yet)
     turned_deg: float = 0.0  # yaw change seen since sending, CCW +, accumulated frame by frame
     last_yaw: Optional[float] = None  # yaw at the last frame, degrees
@@ -90,4 +94,4 @@ class FixedTurn:
     def overdue(self, t: float, latency_s: float) -> bool:
         """Longer than the turn's own time plus a margin since sending: stop waiting for it."""
         return (self.sent_at is not None
-                and t - self.sent_at > duration_s(self.ccw_deg) + FIXED_TURN_MARGIN_S + latency_s)
+                and t - self.sent_at > duration_s(self.ccw_deg, self.rate_dps) + FIXED_TURN_MARGIN_S + latency_s)

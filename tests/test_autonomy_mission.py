@@ -32,6 +32,7 @@ def test_short_mission_on_the_real_world_explores_without_getting_stuck(world_di
 
     world = load_world("real")
     summary, score, far = _short_mission(world, seed=3)
+    assert summary["fixed_turns"] > 0 and summary["fixed_turns_refused"] == 0  # turns in place are fixed turns
     assert summary["stuck"].longest_s <= MAX_STUCK_S
     assert summary["distance"] >= MIN_TRAVEL_M
     assert far >= 15.0, "the rover must leave the start area"
