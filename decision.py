@@ -139,6 +139,7 @@ class Inputs:
     home_by: Optional[float] = None  # return deadline set for this mission (RoverState.home_by_s), s; None: the default
     fixed_turns: bool = False  # the link can send the simulator's fixed_turn (RoverState.fixed_turns)
     reach: Optional[np.ndarray] = field(default=None, repr=False, compare=False)  # _frame_reach's, once computed
+    rover: object = field(default=None, repr=False, compare=False)  # the RoverState read (for maps a rule needs now and then)
 
 
 @dataclass
@@ -311,7 +312,7 @@ def _read_inputs(rover):
         rock_angles=rock_a, rock_dists=rock_d,
         near_sample=bool(getattr(rover, "near_sample", False)), picking_up=bool(getattr(rover, "picking_up", False)),
         samples_remaining=remaining, home_by=_given_home_by(rover),
-        fixed_turns=bool(getattr(rover, "fixed_turns", False)),
+        fixed_turns=bool(getattr(rover, "fixed_turns", False)), rover=rover,
     )
 
 
@@ -673,8 +674,7 @@ def mode_stop(nav, s):
         if abs(turn) <= ROTATE_EXIT_DEG:
             return _end_rotation(nav, s)
         if abs(turn) >= fixed_turn.FIXED_TURN_MIN_DEG:
-            rate = fixed_turn.FIXED_TURN_SWEEP_RATE_DPS if sweep else fixed_turn.FIXED_TURN_RATE_DPS
-            return _begin_fixed_turn(nav, s, turn, rate)
+            return _begin_fixed_turn(nav, s, turn, sweep)
     err = predict.heading_error_at_lead(nav.rotate_heading, s.yaw, nav.lead.yaw_rate_dps, nav.lead.lead_s)
     if nav.rotate_dir is not None and err * nav.rotate_dir < 0 and abs(err) > SWEEP_COMMIT_DEG:
         if abs(s.vel) > TURN_IN_PLACE_SPEED_MPS:
@@ -715,12 +715,31 @@ def _fixed_turn_angle(nav, s):
     return err, False
 
 
-def _begin_fixed_turn(nav, s, turn, rate_dps):
+def _fixed_turn_rate(nav, s, turn, sweep):
+    """deg/s for this fixed turn: slow (FIXED_TURN_SWEEP_RATE_DPS) when it goes the long way round to
+    sweep unsearched wall feet, or when its arc alone sweeps at least explore.SWEEP_MIN_CELLS of them
+    with samples missing (FIXED_TURN_SLOW_FOR_UNSEARCHED) or of frontier cells
+    (FIXED_TURN_SLOW_FOR_FRONTIER): a rock is remembered only after several frames show it
+    (perception.ROCK_MIN_HITS) and a cell is mapped only after several votes, and a fast sweep missed
+    the north-tip sample on seed 0; fast (FIXED_TURN_RATE_DPS) otherwise."""
+    if sweep or (fixed_turn.FIXED_TURN_SLOW_FOR_UNSEARCHED and search_plan.samples_missing(s)
+                 and explore.arc_swept_cells(nav.unsearched, s.pos, s.yaw, turn) >= explore.SWEEP_MIN_CELLS):
+        return fixed_turn.FIXED_TURN_SWEEP_RATE_DPS
+    if fixed_turn.FIXED_TURN_SLOW_FOR_FRONTIER and s.rover is not None:
+        free, obstacle, unknown = paths.grids(s.rover)
+        frontier = explore.frontier_mask(free, unknown, obstacle=obstacle,
+                                         seen_close=exploration_plan.seen_for_frontiers(nav, s))
+        if explore.arc_swept_cells(frontier, s.pos, s.yaw, turn) >= explore.SWEEP_MIN_CELLS:
+            return fixed_turn.FIXED_TURN_SWEEP_RATE_DPS
+    return fixed_turn.FIXED_TURN_RATE_DPS
+
+
+def _begin_fixed_turn(nav, s, turn, sweep):
     """Brake to the standstill the simulator needs, then release the brake for one frame (it refuses
     a fixed turn while the last data command brakes); the next frame sends it (_fixed_turn_step)."""
     if not fixed_turn.still(s.vel):
         return Command(0.0, BRAKE_STOP, 0.0)
-    nav.fixed = fixed_turn.FixedTurn(ccw_deg=float(turn), released_at=s.t, rate_dps=rate_dps)
+    nav.fixed = fixed_turn.FixedTurn(ccw_deg=float(turn), released_at=s.t, rate_dps=_fixed_turn_rate(nav, s, turn, sweep))
     return Command(0.0, 0.0, 0.0)
 
 

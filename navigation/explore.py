@@ -588,6 +588,19 @@ def sweep_direction(unsearched, pos, yaw_deg, target_deg):
     return short
 
 
+def arc_swept_cells(cells, pos, yaw_deg, turn_ccw_deg):
+    """How many of the cells (a bool [y, x] map: unsearched wall feet, frontier) within SWEEP_RADIUS_M a
+    turn in place of turn_ccw_deg (CCW +, any length) from yaw_deg brings into view that neither the
+    start nor the end view (SWEEP_HALF_FOV_DEG either side) holds: what the camera sees only while it turns."""
+    if cells is None or not (np.isfinite(pos[0]) and np.isfinite(pos[1])) or abs(turn_ccw_deg) <= 2 * SWEEP_HALF_FOV_DEG:
+        return 0
+    dx, dy = _unsearched_offsets_within(cells, pos, SWEEP_RADIUS_M)
+    # offset of each cell from the start heading, measured the way the rover turns
+    off = ((np.degrees(np.arctan2(dy, dx)) - float(yaw_deg)) * np.sign(turn_ccw_deg)) % 360.0
+    h = SWEEP_HALF_FOV_DEG
+    return int(((off > h) & (off < abs(turn_ccw_deg) - h)).sum())
+
+
 def nearest_target(targets, pos=None, yaw_deg=None):
     """(row, col) of the target with the lowest search_cost (path cost alone without pos / yaw_deg), or None."""
     if len(targets) == 0:

@@ -22,8 +22,10 @@ import math
 from dataclasses import dataclass
 from typing import Dict, Optional
 
-FIXED_TURN_RATE_DPS = 90.0  # turn speed asked of the simulator (time = angle / this), deg/s
-FIXED_TURN_SWEEP_RATE_DPS = 45.0  # ...for a turn the long way round that sweeps the camera over unsearched wall feet (a rock there needs frames to be remembered), deg/s
+FIXED_TURN_RATE_DPS = 180.0  # turn speed asked of the simulator (time = angle / this), deg/s (90 was slower overall, docs/autonomy.md)
+FIXED_TURN_SWEEP_RATE_DPS = 45.0  # ...for a turn whose arc sweeps what the camera still has to look at (decision._fixed_turn_rate), deg/s
+FIXED_TURN_SLOW_FOR_UNSEARCHED = True  # ...slow: the long way round, or an arc over unsearched wall feet with samples missing (180 deg/s there missed seed 0's north-tip sample)
+FIXED_TURN_SLOW_FOR_FRONTIER = True  # ...slow: an arc over frontier cells (mapped floor beside unmapped ground: cells need several votes)
 FIXED_TURN_MIN_DEG = 15.0  # turns smaller than this are steered (release + send frames cost more than they save), degrees
 FIXED_TURN_STILL_MPS = 0.005  # |telemetry speed| below this counts as the standstill the simulator needs (< 0.01), m/s
 FIXED_TURN_STOP_WAIT_S = 2.0  # braking this long without reaching that standstill: steer this turn instead, s

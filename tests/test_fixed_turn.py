@@ -3,6 +3,8 @@ the payload is strings with matching signs, a stopped rover on the twin turns to
 stops there, a refused fixed turn falls back to steering, and the gym baseline never sends one."""
 import json
 
+import numpy as np
+
 import pytest
 
 import decision
@@ -92,3 +94,15 @@ def test_fixed_turns_off_steers_and_never_sends_one():
     client, events, yaw = _turn_on_twin(target, fixed_turns=False)
     assert "fixed_turn" not in events
     assert abs(decision.predict.wrap_deg(yaw - target)) <= decision.ROTATE_EXIT_DEG + 5.0
+
+
+def test_only_the_arc_a_turn_sweeps_counts_as_swept():
+    from navigation import explore
+
+    unsearched = np.zeros((200, 200), bool)
+    unsearched[105:107, 100:102] = True  # a nook 5 m north of a rover at (100.5, 100.5) facing east
+    pos = (100.5, 100.5)
+    assert explore.arc_swept_cells(unsearched, pos, 0.0, 180.0) == 4  # turning left sweeps past north
+    assert explore.arc_swept_cells(unsearched, pos, 0.0, -180.0) == 0  # turning right does not
+    assert explore.arc_swept_cells(unsearched, pos, 0.0, 60.0) == 0  # the start and end views overlap
+    assert explore.arc_swept_cells(None, pos, 0.0, 180.0) == 0
