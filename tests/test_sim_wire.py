@@ -109,7 +109,7 @@ def test_lockstep_against_real_client_server(tmp_path):
     assert twin.frame >= FRAMES, (tmp_path / "drive_rover.log").read_text()[-2000:]
     assert sim.rejected == 0 and sim.connections == 1
     events = {e for e, _ in payloads}
-    assert events <= {"data", "pickup", "manual"} and "data" in events
+    assert events <= {"data", "pickup", "manual", "fixed_turn"} and "data" in events  # turns in place: fixed_turn
     for event, payload in payloads:
         assert isinstance(payload, dict)
         assert all(isinstance(v, str) for v in payload.values()), payload
