@@ -229,6 +229,8 @@ def main(argv=None):
                         "current one in the same run (pose by pose alternating; missions alternating)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    for name in ("decision", "navigation", "perception", "autonomy"):  # the mission run's client chatter
+        logging.getLogger(name).setLevel(logging.WARNING)
     import cv2
 
     cv2.setNumThreads(1)  # as sim.evaluate's workers (one mission per core): OpenCV's helper threads only add CPU time
