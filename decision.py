@@ -184,8 +184,6 @@ class NavMemory:
         self.fixed = None  # the fixed_turn.FixedTurn in flight, or None
         self.fixed_steer = False  # this turn in place is steered: its fixed turn was refused
         self.fixed_refusals = 0  # fixed turns refused in a row (fixed_turn.FIXED_TURN_MAX_REFUSALS: stop asking)
-        self.fixed_sent = 0  # fixed turns sent this mission
-        self.fixed_sent_deg = 0.0  # ...and their degrees in all
         self.fixed_refused = 0  # fixed turns the simulator refused this mission (each then steered)
         # planning
         self.path_xy = np.zeros((0, 2))
@@ -753,8 +751,6 @@ def _fixed_turn_step(nav, s):
             nav.fixed = None
             return None
         ft.sent_at, ft.last_yaw = s.t, s.yaw
-        nav.fixed_sent += 1
-        nav.fixed_sent_deg += abs(ft.ccw_deg)
         log.debug("fixed turn %+.0f deg at t=%.1f", ft.ccw_deg, s.t)
         return Command(0.0, 0.0, 0.0, fixed_turn=(ft.ccw_deg, ft.rate_dps))
     ft.observe(s.yaw)

@@ -22,6 +22,8 @@ import math
 from dataclasses import dataclass
 from typing import Dict, Optional
 
+from navigation.predict import wrap_deg
+
 FIXED_TURN_RATE_DPS = 180.0  # turn speed asked of the simulator (time = angle / this), deg/s (90 was slower overall, docs/autonomy.md)
 FIXED_TURN_SWEEP_RATE_DPS = 45.0  # ...for a turn whose arc sweeps what the camera still has to look at (decision._fixed_turn_rate), deg/s
 FIXED_TURN_SLOW_FOR_UNSEARCHED = True  # ...slow: the long way round, or an arc over unsearched wall feet with samples missing (180 deg/s there missed seed 0's north-tip sample)
@@ -35,11 +37,6 @@ FIXED_TURN_DONE_DEG = 1.0  # the turn has arrived when this close to its full an
 FIXED_TURN_MARGIN_S = 0.5  # wait at most the turn's own time + this (+ latency) for it to arrive, s
 FIXED_TURN_MAX_REFUSALS = 3  # this many refusals in a row: the simulator does not do fixed turns, steer from then on
 ANGLE_FORMAT = "{:.4f}"  # plain decimal with '.', as the simulator's float.Parse expects
-
-
-def wrap_deg(a: float) -> float:
-    """Degrees wrapped to [-180, 180)."""
-    return (float(a) + 180.0) % 360.0 - 180.0
 
 
 def duration_s(ccw_deg: float, rate_dps: Optional[float] = None) -> float:
