@@ -85,6 +85,7 @@ class MissionResult:
     fixed_turns: int | None = None  # in-process: fixed_turn commands the client sent
     fixed_turn_deg: float | None = None  # ...and their degrees in all
     fixed_turns_refused: int | None = None  # ...of which the client saw the simulator refuse (and steered instead)
+    reused_frames: int | None = None  # in-process: frames that reused the last image, the rover still (sim/twin.py)
 
     def as_dict(self):
         return {k: nan_to_none(v) for k, v in asdict(self).items()}
@@ -247,6 +248,7 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
                 rejected=twin.rejected_commands, timing=timing,
                 fixed_turns=turns.count, fixed_turn_deg=round(turns.degrees, 1),
                 fixed_turns_refused=getattr(getattr(client.rover, "nav", None), "fixed_refused", None),
+                reused_frames=twin.reused_frames,
                 reply_delay_ms=round(1e3 * statistics.median(loop.delays), 1) if loop.delays else None)
 
 
@@ -282,7 +284,7 @@ def score(world, seed, mode, summary, time_limit) -> MissionResult:
         telemetry_hz=round(1.0 / period, 2) if period else None,
         reply_delay_ms=summary.get("reply_delay_ms"), round_trip_ms=summary.get("round_trip_ms"),
         fixed_turns=summary.get("fixed_turns"), fixed_turn_deg=summary.get("fixed_turn_deg"),
-        fixed_turns_refused=summary.get("fixed_turns_refused"),
+        fixed_turns_refused=summary.get("fixed_turns_refused"), reused_frames=summary.get("reused_frames"),
         render_fps=round(summary["render_frames"] / tr.sim_time, 1) if summary.get("render_frames") and tr.sim_time
         else None)
 

@@ -107,6 +107,7 @@ class TyreTracks:
         self._counts = [0, 0]
         self._last = [None, None]  # where each wheel laid its last quad, (x, y)
         self._quads = None  # cached (N, 4) array, None when stale
+        self.laid = 0  # quads laid since the last clear (trimmed ones included): changes whenever the tracks do
 
     @staticmethod
     def wheel_positions(x, y, yaw_deg):
@@ -137,6 +138,7 @@ class TyreTracks:
             self._counts[i] = n
             self._last[i] = (wx, wy)
             self._quads = None
+            self.laid += 1
         return self
 
     def _surface(self, x, y) -> float:
