@@ -52,7 +52,7 @@ def render_stages(world, poses, samples):
                          R.UNDERSIDE_BAND_M, R.UNDERSIDE_RAMP_M, float(world.size_m), r._dark_lut, R.DARK_LUT_STEP_M,
                          r.column_share_m, R.COLUMN_SHARE_RATIO, R.COLUMN_SHARE_LEVELS, r.share_rock, r._col_order,
                          r._col_offset,
-                         shared, r.share_rock_ratio)
+                         shared, r.share_rock_ratio, r._col_min_m)
         out["raymarch kernel"].append(pc() - t0)
         t0 = pc()
         shading.backscatter_columns(rot, r.ray_a, R.SUN_AZIMUTH_DEG)

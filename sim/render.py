@@ -5,9 +5,10 @@ has cast_shadows off) is baked once into 0.1 m rasters (solid top, overhang gap,
 column-wise heightfield raymarch (numba): each image column is walked from the
 bottom row up, every ray resuming at the horizontal distance where the ray below
 hit (exact for a level camera, a few-pixel approximation under pitch/roll), with
-1 m max-height cells skipped in one jump. Every 8th column is marched first; the columns between
-take the average of their two neighbours (4 apart, then 2, then 1) wherever both hit open terrain (or both rock)
-at nearly one depth and colour (column coherence), and march the rest. Sample rocks are small shaded ellipsoids
+1 m max-height cells skipped in one jump. Every 16th column is marched first; the columns between
+take the average of their two neighbours (8 apart, only where both hits are at least 16 m away; then 4, 2 and 1
+apart at any distance) wherever both hit open terrain (or both rock) at nearly one depth and colour (column
+coherence), and march the rest. Sample rocks are small shaded ellipsoids
 drawn over it with a depth test.
 
 Poses outside the world are clamped into it; a camera inside rock sees that rock
@@ -51,6 +52,8 @@ COLUMN_SHARE_MAX_M = 120.0  # a column may average its neighbours' terrain hits 
 COLUMN_SHARE_RATIO = 0.08  # ... when their depths differ by at most this fraction (0.06 before round 11)
 COLUMN_SHARE_LEVELS = 12  # ... and their colours by at most this in every channel, grey levels
 COLUMN_SHARE_TIERS = 3  # 1: odd columns may share; 2: so may columns 2 mod 4; 3: so may columns 4 mod 8 (every 8th is marched; 2 before round 11), count
+COLUMN_SHARE_FAR_TIERS = 1  # tiers above those that share only hits at least COLUMN_SHARE_FAR_MIN_M away (1: every 16th column marched; 0 before round 12), count
+COLUMN_SHARE_FAR_MIN_M = 16.0  # ... both neighbours' hits at least this far, m
 COLUMN_SHARE_ROCK = True  # rock hits may be averaged too (both neighbours on rock, same colour test)
 COLUMN_SHARE_ROCK_RATIO = 0.15  # ... when their depths differ by at most this fraction (dark walls: far below the navigable threshold)
 UNDER_OVERHANG = 4  # flag added to a pixel's hit kind when its ray passed under rock (such hits are not shared)
@@ -409,18 +412,25 @@ def _ray_column(rot, a, ray_b, col):
 
     col[c, v]: 0 hx, 1 hy, 2 k = dz / |d_h|, 3 1/|d_h|, 4 1/hx, 5 1/hy (0 for a zero component),
     6 |d| / |d_h| (distance per horizontal metre), 7 1/k (0 for a level ray). Branch-free, so it vectorises; one column at a
-    time so the table stays in L1 next to the march.
+    time so the table stays in L1 next to the march. In float32 (round 12): eight lanes to a vector instead of four and
+    far cheaper divisions and square roots, 0.19 -> 0.03 ms per frame; relative error ~1e-7 (1e-5 m at 120 m).
     """
-    col_x = rot[0, 0] * a + rot[0, 2]
-    col_y = rot[1, 0] * a + rot[1, 2]
-    col_z = rot[2, 0] * a + rot[2, 2]
+    col_x = np.float32(rot[0, 0] * a + rot[0, 2])
+    col_y = np.float32(rot[1, 0] * a + rot[1, 2])
+    col_z = np.float32(rot[2, 0] * a + rot[2, 2])
+    r01 = np.float32(rot[0, 1])
+    r11 = np.float32(rot[1, 1])
+    r21 = np.float32(rot[2, 1])
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    tiny = np.float32(1e-12)
     for v in range(ray_b.shape[0]):
-        b = ray_b[v]
-        dx = col_x + rot[0, 1] * b
-        dy = col_y + rot[1, 1] * b
-        dz = col_z + rot[2, 1] * b
-        hlen = max(math.sqrt(dx * dx + dy * dy), 1e-9)
-        inv_h = 1.0 / hlen
+        b = np.float32(ray_b[v])
+        dx = col_x + r01 * b
+        dy = col_y + r11 * b
+        dz = col_z + r21 * b
+        hlen = max(np.sqrt(dx * dx + dy * dy), np.float32(1e-9))
+        inv_h = one / hlen
         hx = dx * inv_h
         hy = dy * inv_h
         k = dz * inv_h
@@ -428,10 +438,10 @@ def _ray_column(rot, a, ray_b, col):
         col[1, v] = hy
         col[2, v] = k
         col[3, v] = inv_h
-        col[4, v] = 1.0 / hx if abs(hx) > 1e-12 else 0.0
-        col[5, v] = 1.0 / hy if abs(hy) > 1e-12 else 0.0
-        col[6, v] = math.sqrt(1.0 + k * k)
-        col[7, v] = 1.0 / k if abs(k) > 1e-12 else 0.0
+        col[4, v] = one / hx if abs(hx) > tiny else zero
+        col[5, v] = one / hy if abs(hy) > tiny else zero
+        col[6, v] = np.sqrt(one + k * k)
+        col[7, v] = one / k if abs(k) > tiny else zero
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -558,7 +568,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                    far_m, step_min, step_k, refine_iters, zmax, sky_rgb, far_rgb,
                    underside_shade, underside_band_m, underside_ramp_m, world_size, dark_lut, dark_lut_step, share_depth_m, share_ratio,
                    share_levels, share_rock, col_order, col_offset, shared_px,
-                   rock_ratio):
+                   rock_ratio, col_min_m):
     """Column-wise raymarch into row-major (H, W, 3) image and (H, W) depth (module docstring).
 
     Free space is skipped per block_m block (above everything in it) and per coarse_m cell
@@ -581,7 +591,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
     half = 1 << (WEIGHT_BITS - 1)
     rounding = half | (half << LANE_BITS) | (half << (2 * LANE_BITS))
     wscale = float(1 << WEIGHT_BITS)
-    table = np.empty((8, h_img))
+    table = np.empty((8, h_img), np.float32)  # the column's ray table (_ray_column)
     # per pixel: 1 terrain, 3 rock, 0 sky or far; + UNDER_OVERHANG when the ray passed under rock
     hit_kind = np.zeros((h_img, w_img), np.uint8)
     for i_col in range(w_img):
@@ -589,6 +599,7 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
         u = col_order[i_col]
         off = col_offset[u]
         shared = off > 0 and share_depth_m > 0.0
+        min_m = col_min_m[u]  # this column shares only hits at least this far (0 but in the far-only tiers)
         _ray_column(rot, ray_a[u], ray_b, table)
         prev_s = 0.0  # where the ray below ended (hit, sky or far), horizontal m
         sky_rest = False
@@ -619,7 +630,8 @@ def _render_kernel(img, depth, rot, ray_a, ray_b, terrain, inv_tcell, tex, tex_u
                 d_l = depth[v, u - off]
                 d_r = depth[v, u + off]
                 ratio = share_ratio if kind_l == 1 else rock_ratio
-                if (d_l < share_depth_m and d_r < share_depth_m and abs(d_l - d_r) <= ratio * min(d_l, d_r)
+                if (d_l < share_depth_m and d_r < share_depth_m and d_l >= min_m and d_r >= min_m
+                        and abs(d_l - d_r) <= ratio * min(d_l, d_r)
                         and _colours_close(img, v, u - off, u + off, share_levels)):
                     for ch in range(3):
                         img[v, u, ch] = (np.uint16(img[v, u - off, ch]) + np.uint16(img[v, u + off, ch]) + 1) >> 1
@@ -905,6 +917,13 @@ def column_plan(width: int, tiers: int):
     return np.array(marched + [u for u in order if offset[u] > 0], np.int64), offset
 
 
+def far_tier_min_depth(offset: np.ndarray, tiers: int, min_m: float) -> np.ndarray:
+    """Per column, the nearest hit it may average (0: any): columns whose neighbours are farther apart than
+    the `tiers` ordinary tiers reach share only hits at least `min_m` away (where the time goes and a wider
+    average moves the near navigable mask not at all)."""
+    return np.where(offset >= (1 << tiers), float(min_m), 0.0)
+
+
 def pack_rgb(rgb: np.ndarray) -> np.ndarray:
     """uint8 (..., 3) -> int64 with each channel in its own LANE_BITS-bit lane (for the kernel's blend)."""
     c = rgb.astype(np.int64)
@@ -968,7 +987,8 @@ class Renderer:
         self.share_floor_look = True  # False: the floor look is computed on the shared pixels too (the older image)
         self.share_rock = COLUMN_SHARE_ROCK  # False: only terrain hits are averaged from neighbouring columns
         self.share_rock_ratio = COLUMN_SHARE_ROCK_RATIO  # depth test of averaged rock hits (fraction)
-        self._col_order, self._col_offset = column_plan(IMAGE_W, COLUMN_SHARE_TIERS)
+        self._col_order, self._col_offset = column_plan(IMAGE_W, COLUMN_SHARE_TIERS + COLUMN_SHARE_FAR_TIERS)
+        self._col_min_m = far_tier_min_depth(self._col_offset, COLUMN_SHARE_TIERS, COLUMN_SHARE_FAR_MIN_M)
         self.last_depth = np.full((IMAGE_H, IMAGE_W), np.inf, np.float32)
         self.last_shared = np.zeros((IMAGE_H, IMAGE_W), np.uint8)
         self._last_camera = None
@@ -1052,7 +1072,7 @@ class Renderer:
                        UNDERSIDE_RAMP_M if self.smooth_underside else 0.0, float(self.world.size_m),
                        self._dark_lut, DARK_LUT_STEP_M, self.column_share_m, COLUMN_SHARE_RATIO,
                        COLUMN_SHARE_LEVELS, self.share_rock, self._col_order, self._col_offset, shared_px,
-                       self.share_rock_ratio)
+                       self.share_rock_ratio, self._col_min_m)
         if self._splat_mip is not None or self.backscatter:
             if self.share_floor_look and self.column_share_m > 0.0:
                 self._draw_floor_look(img, depth, origin, np.ascontiguousarray(rot), shared_px)

@@ -317,38 +317,43 @@ def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_
     tn = terrain.shape[0]  # the clamp's bound, as in _terrain_with_slope
     stride = terrain.shape[1]
     tflat = terrain.reshape(-1)
-    ax0 = np.empty(w)
-    ay0 = np.empty(w)
-    az0 = np.empty(w)
+    ax0 = np.empty(w, np.float32)
+    ay0 = np.empty(w, np.float32)
+    az0 = np.empty(w, np.float32)
     for u in range(w):
         ax0[u] = rot[0, 0] * ray_a[u]
         ay0[u] = rot[1, 0] * ray_a[u]
         az0[u] = rot[2, 0] * ray_a[u]
+    buf32 = np.empty((8, w), np.float32)  # stage 1's per-pixel rows in float32 (round 12: twice the lanes)
+    ox32, oy32, oz32 = np.float32(origin[0]), np.float32(origin[1]), np.float32(origin[2])
+    r02_32, r12_32, r22_32 = np.float32(rot[0, 2]), np.float32(rot[1, 2]), np.float32(rot[2, 2])
     todo = np.empty(w, np.int64)  # the row's pixels in work: u (mip level, maybe lobe) or -1 - u (lobe only)
     ox, oy, oz = origin[0], origin[1], origin[2]
     r02, r12, r22 = rot[0, 2], rot[1, 2], rot[2, 2]
     for v in range(h):
-        b0, b1, b2 = rot[0, 1] * ray_b[v], rot[1, 1] * ray_b[v], rot[2, 1] * ray_b[v]
-        X, Y, Z = buf[0], buf[1], buf[2]
-        DX, DY, DZ = buf[3], buf[4], buf[5]
-        NORM, DIST = buf[6], buf[7]
+        b0 = np.float32(rot[0, 1] * ray_b[v]) + r02_32
+        b1 = np.float32(rot[1, 1] * ray_b[v]) + r12_32
+        b2 = np.float32(rot[2, 1] * ray_b[v]) + r22_32
+        X, Y, Z = buf32[0], buf32[1], buf32[2]
+        DX, DY, DZ = buf32[3], buf32[4], buf32[5]
+        NORM, DIST = buf32[6], buf32[7]
         drow = depth[v]
         srow = skip[v]
         # stage 1: ray directions, hit points, viewing distances (every pixel; sky gives inf/nan, never used)
         for u in range(w):
-            d = np.float64(drow[u])
-            dx = ax0[u] + b0 + r02
-            dy = ay0[u] + b1 + r12
-            dz = az0[u] + b2 + r22
+            d = drow[u]
+            dx = ax0[u] + b0
+            dy = ay0[u] + b1
+            dz = az0[u] + b2
             DX[u] = dx
             DY[u] = dy
             DZ[u] = dz
-            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+            norm = np.sqrt(dx * dx + dy * dy + dz * dz)
             NORM[u] = norm
             DIST[u] = d * norm
-            X[u] = ox + d * dx
-            Y[u] = oy + d * dy
-            Z[u] = oz + d * dz
+            X[u] = ox32 + d * dx
+            Y[u] = oy32 + d * dy
+            Z[u] = oz32 + d * dz
         # stage 2: the pixels either term applies to
         m = 0
         for u in range(w):

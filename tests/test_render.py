@@ -329,7 +329,7 @@ def test_rock_hits_are_shared_between_columns_only_where_both_neighbours_are_roc
     assert added > 1000  # it does share rock (~1,300 pixels per real-world frame)
 
 
-@pytest.mark.parametrize("tiers", [1, 2, 3])
+@pytest.mark.parametrize("tiers", [1, 2, 3, 4])
 def test_column_plan_draws_every_column_once_after_the_neighbours_it_averages(tiers):
     from sim.render import column_plan
 
@@ -341,6 +341,54 @@ def test_column_plan_draws_every_column_once_after_the_neighbours_it_averages(ti
             assert {u - offset[u], u + offset[u]} <= done, u
         done.add(u)
     assert (offset == 0).sum() <= IMAGE_W // 2 ** tiers + tiers  # only the last column of each tier lacks a right neighbour
+
+
+def test_far_tier_columns_share_only_far_hits(canyon_renderer):
+    """Round 12's fourth tier (every 16th column marched): the columns between take their neighbours' average only
+    where both hit at least COLUMN_SHARE_FAR_MIN_M away, so nothing near the rover (the 5 m mask) is averaged
+    across 16 columns; the ordinary tiers still share near hits."""
+    from sim.render import COLUMN_SHARE_FAR_MIN_M, COLUMN_SHARE_TIERS
+
+    r = canyon_renderer
+    far_cols = r._col_offset >= (1 << COLUMN_SHARE_TIERS)
+    assert far_cols.sum() == IMAGE_W // 16 - 1  # columns 8 mod 16 (the last has no right neighbour)
+    rng = np.random.default_rng(21)
+    rows, cols = np.nonzero(r.world.nav_truth)
+    far_shared = near_shared = 0
+    for i in rng.integers(0, rows.size, 6):
+        r.render((cols[i] + 0.5, rows[i] + 0.5, rng.uniform(0, 360), rng.normal(0, 2), rng.normal(0, 2)))
+        shared = r.last_shared.astype(bool)
+        assert (r.last_depth[:, far_cols][shared[:, far_cols]] >= COLUMN_SHARE_FAR_MIN_M).all()
+        far_shared += shared[:, far_cols].sum()
+        near_shared += (shared[:, ~far_cols] & (r.last_depth[:, ~far_cols] < 5.0)).sum()
+    assert far_shared > 0 and near_shared > 0
+
+
+def test_ray_table_in_float32_matches_float64():
+    """The kernel's per-column ray table is computed in float32 (round 12): within ~1e-6 of the float64 values,
+    with the same zero convention for level rays and axis-parallel directions."""
+    from sim.render import CX, CY, FOCAL_PX, _ray_column
+
+    rng = np.random.default_rng(3)
+    ray_a = (np.arange(IMAGE_W) + 0.5 - CX) / FOCAL_PX
+    ray_b = (CY - (np.arange(IMAGE_H) + 0.5)) / FOCAL_PX
+    for yaw, pitch, roll in [(0.0, 0.0, 0.0), (90.0, 0.0, 0.0)] + [tuple(rng.uniform(-5, 5, 3) + (rng.uniform(0, 360), 0, 0))
+                                                                  for _ in range(4)]:
+        rot = body_rotation(yaw, pitch, roll)
+        for u in (0, 77, 160, 319):
+            table = np.empty((8, IMAGE_H), np.float32)
+            _ray_column(rot, ray_a[u], ray_b, table)
+            d = rot @ np.stack([np.full(IMAGE_H, ray_a[u]), ray_b, np.ones(IMAGE_H)])
+            h = np.hypot(d[0], d[1])
+            hx, hy, k = d[0] / h, d[1] / h, d[2] / h
+            want = {0: hx, 1: hy, 2: k, 3: 1 / h, 6: np.sqrt(1 + k * k)}
+            for c in (0, 1, 2, 3, 6):  # components near zero (k at the horizon) to within ~1e-7 absolute
+                assert np.allclose(table[c], want[c], rtol=2e-6, atol=2e-7), (yaw, pitch, roll, u, c)
+            for c, of in ((4, 0), (5, 1), (7, 2)):  # reciprocals of the float32 components, 0 for a zero one
+                x = table[of].astype(np.float64)
+                ok = np.abs(x) > 1e-12
+                assert np.allclose(table[c][ok] * x[ok], 1.0, rtol=2e-6), (yaw, pitch, roll, u, c)
+                assert (table[c][~ok] == 0).all()
 
 
 # poses of the logged test_dataset frames 135, 143 and 151, looking at the overhang at (106-110, 100)

@@ -96,7 +96,7 @@ def _poses_on_floor(world, count, seed):
     return [(cols[i] + 0.5, rows[i] + 0.5, rng.uniform(0, 360), rng.normal(0, 3), rng.normal(0, 3)) for i in pick]
 
 
-def _fused_and_two_pass_frames_are_identical(renderer, poses):
+def _fused_and_two_pass_frames_agree(renderer, poses):
     for backscatter in (True, False):
         renderer.backscatter = backscatter
         for pose in poses:
@@ -104,14 +104,18 @@ def _fused_and_two_pass_frames_are_identical(renderer, poses):
             fused = renderer.render(pose)
             renderer.fused_floor_look = False
             two_pass = renderer.render(pose)
-            assert np.array_equal(fused, two_pass), (pose, backscatter, np.abs(fused.astype(int) - two_pass).max())
+            # the fused pass finds hit points and distances in float32 (round 12, docs/twin-render.md; ~0.03 ms a
+            # frame); the two passes in float64: measured 1e-5 of pixels one level apart, none more
+            diff = np.abs(fused.astype(int) - two_pass)
+            assert diff.max() <= 1, (pose, backscatter, diff.max())
+            assert (diff > 0).mean() <= 1e-3, (pose, backscatter, (diff > 0).mean())
     renderer.fused_floor_look = True
 
 
 @pytest.mark.parametrize("name", ["procedural:0", "walled"])
-def test_fused_floor_look_draws_the_bytes_of_the_two_passes(name):
-    """apply_floor_look (one staged pass) against apply_splat_mip then apply_backscatter (the oracle): byte for
-    byte, without cast shadows (both terms, and the mipmaps alone) and with them (the lobe alone)."""
+def test_fused_floor_look_draws_the_two_passes_within_a_level(name):
+    """apply_floor_look (one staged pass) against apply_splat_mip then apply_backscatter (the oracle): within one
+    level on at most 0.1 % of pixels (byte for byte before round 12's float32 stage), without cast shadows (both terms, and the mipmaps alone) and with them (the lobe alone)."""
     from sim.world import load_world
 
     world = _walled_world() if name == "walled" else load_world(name)
@@ -119,10 +123,10 @@ def test_fused_floor_look_draws_the_bytes_of_the_two_passes(name):
     if name == "walled":
         poses += [(110.0, 100.0, 0.0, 0.0, 0.0), (112.0, 90.0, 20.0, 2.0, -1.0)]  # facing the dark strip
     for shadows in (False, True):
-        _fused_and_two_pass_frames_are_identical(Renderer(with_shadows(world, shadows)), poses)
+        _fused_and_two_pass_frames_agree(Renderer(with_shadows(world, shadows)), poses)
 
 
-def test_fused_floor_look_draws_the_bytes_of_the_two_passes_on_the_real_world(world_dir):
+def test_fused_floor_look_draws_the_two_passes_within_a_level_on_the_real_world(world_dir):
     """The same on the real world at the logged test_dataset poses (the benchmark's), rough poses added."""
     from sim.realism import read_test_dataset
     from sim.world import load_world
@@ -130,7 +134,7 @@ def test_fused_floor_look_draws_the_bytes_of_the_two_passes_on_the_real_world(wo
     world = load_world("real")
     frames = read_test_dataset()
     poses = [frames[i].pose for i in range(0, len(frames), 40)] + _poses_on_floor(world, 4, 5)
-    _fused_and_two_pass_frames_are_identical(Renderer(world), poses)
+    _fused_and_two_pass_frames_agree(Renderer(world), poses)
 
 
 @pytest.mark.parametrize("shadows", [False, True])
