@@ -100,6 +100,8 @@ SAMPLE_ROTATE_DEG = 35.0  # turn in place toward a rock further off than this (w
 SAMPLE_STEER_GAIN = 1.0  # steering command per degree of rock bearing
 SAMPLE_TIMEOUT_S = 90.0  # give up a rock after this long in sample mode, s
 SAMPLE_CLOSE_TIMEOUT_S = 30.0  # ...or after this long within rock_choice.SAMPLE_VISUAL_M of it, s
+ROCK_BESIDE_BACK_S = 3.0  # reverse straight at most this long when a rock the camera showed from close is now beside the rover, s
+ROCK_BESIDE_CLEAR_M = 1.5  # ...or until the rock is this far from the rover, m
 SAMPLE_PATH_SPEED_MPS = 3.0  # top speed on the way to a rock, m/s
 PICKUP_STOP_SPEED_MPS = 0.04  # request pickup only below this speed (autonomy's gate is 0.05), m/s
 PICKUP_RETRY_S = 2.0  # re-request a pickup if picking_up did not start within this, s
@@ -230,6 +232,8 @@ class NavMemory:
         self.rock_came_close = False  # this attempt brought the rover within rock_choice.SAMPLE_VISUAL_M of the target
         self.rock_seen_close = False  # ...and the camera showed the target within rock_choice.SAMPLE_VISUAL_M
         self.rock_best_px = 0  # most rock pixels of any camera sighting matched to the target this attempt
+        self.rock_backed_off = False  # this attempt already reversed away from the rock once (mode_sample)
+        self.rock_back_until = -math.inf  # reversing away from a rock beside the rover until then, s
         self.pickup_sent_at = -math.inf
         self.was_picking = False
         self.last_collect_t = -math.inf  # when the last collection was registered, s
@@ -852,6 +856,8 @@ def mode_sample(rover, nav, s):
         rock_choice.give_up_rock(nav, s)
         nav.path_goal = None
         return Command(0.0, BRAKE_STOP, 0.0)
+    if s.t < nav.rock_back_until and dist < ROCK_BESIDE_CLEAR_M:
+        return Command(stuck.BACK_OFF_THROTTLE, 0.0, 0.0)
     staged = _stage_approach(rover, nav, s, dist)
     if staged is not None:
         return staged
@@ -866,6 +872,14 @@ def mode_sample(rover, nav, s):
         alpha, dist = nav.rock_bearing, nav.rock_dist
         reason = "sample-vision"
     else:
+        if not turning.bearing_usable(dist) and nav.rock_seen_close and not nav.rock_backed_off:
+            # the camera showed this rock from close: it is beside the rover, where near_sample stays off and
+            # the camera cannot see (held-out seed 89, shadows on, gave the east-nook rock up 0.5 m off it).
+            # Reverse straight once, so it comes back into view ahead
+            log.info("rock at (%.1f, %.1f) is beside the rover: backing off to see it again", *nav.rock_target)
+            nav.rock_backed_off = True
+            nav.rock_back_until = s.t + ROCK_BESIDE_BACK_S
+            return Command(stuck.BACK_OFF_THROTTLE, 0.0, 0.0)
         if not turning.bearing_usable(dist):
             # the remembered spot is under the rover, the camera does not show a rock and near_sample is
             # off: it is not there (seed 16 at 15 fps turned nine times toward such a spot, 0.1-0.4 m off)

@@ -100,6 +100,7 @@ def _new_rock_attempt(nav):
     """Forget the camera evidence gathered for the previous target (see give_up_rock)."""
     nav.rock_came_close = nav.rock_seen_close = False
     nav.rock_best_px = 0
+    nav.rock_backed_off = False
 
 
 def give_up_rock(nav, s):

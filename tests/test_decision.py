@@ -668,3 +668,50 @@ def test_a_remembered_rock_under_the_rover_is_given_up_not_turned_to():
     assert r.nav.rotate_heading is None and r.throttle == 0.0
     assert r.nav.rock_target is None
     assert any(abs(x - 131.08) < 0.01 for x, _y, _until in r.nav.rock_skip)
+
+
+def test_a_rock_seen_close_and_now_beside_the_rover_is_backed_off_from_once_then_given_up():
+    """Held-out seed 89 (shadows on) drove to 0.5 m of the east-nook rock with it beside the rover
+    (near_sample off, out of the camera's view) and gave it up as a phantom at 801 s."""
+    r = make_rover(pos=(110.0, 85.0), yaw=0.0, t=200.0)
+    nav = r.nav
+    nav.rock_target, nav.rock_since, nav.rock_close_since = (110.0, 84.5), 195.0, 196.0  # 0.5 m to the right
+    nav.rock_seen_time, nav.rock_seen_close, nav.rock_came_close = 198.0, True, True
+    nav.stage_for, nav.stage_done = nav.rock_target, True
+    empty = np.zeros(0)
+
+    def step(t):
+        s = decision.Inputs(t, r.pos, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
+        return decision.mode_sample(r, nav, s)
+
+    cmd = step(200.0)
+    assert nav.rock_target is not None and cmd.throttle < 0 and cmd.steer == 0.0
+    assert step(200.0 + decision.ROCK_BESIDE_BACK_S - 0.1).throttle < 0, "still reversing"
+    step(200.0 + decision.ROCK_BESIDE_BACK_S + 0.1)  # the rover did not move here: the rock is still beside it
+    assert nav.rock_target is None, "a second time beside the rover: given up as before"
+
+
+def test_backing_off_from_a_rock_beside_the_rover_ends_once_it_is_clear():
+    r = make_rover(pos=(110.0, 85.0), yaw=0.0, t=200.0)
+    nav = r.nav
+    nav.rock_target, nav.rock_since, nav.rock_close_since = (110.0, 84.5), 195.0, 196.0
+    nav.rock_seen_time, nav.rock_seen_close, nav.rock_came_close = 198.0, True, True
+    nav.stage_for, nav.stage_done = nav.rock_target, True
+    empty = np.zeros(0)
+    s = decision.Inputs(200.0, r.pos, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
+    assert decision.mode_sample(r, nav, s).throttle < 0
+    back = (110.0 - decision.ROCK_BESIDE_CLEAR_M, 85.0)  # reversed far enough: the rock is ahead, to the right
+    s = decision.Inputs(201.0, back, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
+    assert decision.mode_sample(r, nav, s).throttle >= 0 and nav.rock_target is not None
+
+
+def test_a_rock_never_seen_close_under_the_rover_is_given_up_at_once():
+    r = make_rover(pos=(110.0, 85.0), yaw=0.0, t=200.0)
+    nav = r.nav
+    nav.rock_target, nav.rock_since, nav.rock_close_since = (110.0, 84.7), 195.0, 196.0
+    nav.rock_seen_time, nav.rock_seen_close, nav.rock_came_close = 180.0, False, True
+    nav.stage_for, nav.stage_done = nav.rock_target, True
+    empty = np.zeros(0)
+    s = decision.Inputs(200.0, r.pos, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
+    decision.mode_sample(r, nav, s)
+    assert nav.rock_target is None
