@@ -670,20 +670,27 @@ def test_a_remembered_rock_under_the_rover_is_given_up_not_turned_to():
     assert any(abs(x - 131.08) < 0.01 for x, _y, _until in r.nav.rock_skip)
 
 
-def test_a_rock_seen_close_and_now_beside_the_rover_is_backed_off_from_once_then_given_up():
-    """Held-out seed 89 (shadows on) drove to 0.5 m of the east-nook rock with it beside the rover
-    (near_sample off, out of the camera's view) and gave it up as a phantom at 801 s."""
+def _rock_beside(seen_close=True, seen_time=198.0, lateral_m=0.5):
+    """A rover at (110, 85) facing east, in sample mode for a rock lateral_m to its right, and a step(t, pos)
+    that runs mode_sample with an open floor in view and no rock pixels."""
     r = make_rover(pos=(110.0, 85.0), yaw=0.0, t=200.0)
     nav = r.nav
-    nav.rock_target, nav.rock_since, nav.rock_close_since = (110.0, 84.5), 195.0, 196.0  # 0.5 m to the right
-    nav.rock_seen_time, nav.rock_seen_close, nav.rock_came_close = 198.0, True, True
+    nav.rock_target, nav.rock_since, nav.rock_close_since = (110.0, 85.0 - lateral_m), 195.0, 196.0
+    nav.rock_seen_time, nav.rock_seen_close, nav.rock_came_close = seen_time, seen_close, True
     nav.stage_for, nav.stage_done = nav.rock_target, True
     empty = np.zeros(0)
 
-    def step(t):
-        s = decision.Inputs(t, r.pos, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
+    def step(t, pos=r.pos):
+        s = decision.Inputs(t, pos, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
         return decision.mode_sample(r, nav, s)
 
+    return nav, step
+
+
+def test_a_rock_seen_close_and_now_beside_the_rover_is_backed_off_from_once_then_given_up():
+    """Held-out seed 89 (shadows on) drove to 0.5 m of the east-nook rock with it beside the rover
+    (near_sample off, out of the camera's view) and gave it up as a phantom at 801 s."""
+    nav, step = _rock_beside()
     cmd = step(200.0)
     assert nav.rock_target is not None and cmd.throttle < 0 and cmd.steer == 0.0
     assert step(200.0 + decision.ROCK_BESIDE_BACK_S - 0.1).throttle < 0, "still reversing"
@@ -692,26 +699,13 @@ def test_a_rock_seen_close_and_now_beside_the_rover_is_backed_off_from_once_then
 
 
 def test_backing_off_from_a_rock_beside_the_rover_ends_once_it_is_clear():
-    r = make_rover(pos=(110.0, 85.0), yaw=0.0, t=200.0)
-    nav = r.nav
-    nav.rock_target, nav.rock_since, nav.rock_close_since = (110.0, 84.5), 195.0, 196.0
-    nav.rock_seen_time, nav.rock_seen_close, nav.rock_came_close = 198.0, True, True
-    nav.stage_for, nav.stage_done = nav.rock_target, True
-    empty = np.zeros(0)
-    s = decision.Inputs(200.0, r.pos, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
-    assert decision.mode_sample(r, nav, s).throttle < 0
+    nav, step = _rock_beside()
+    assert step(200.0).throttle < 0
     back = (110.0 - decision.ROCK_BESIDE_CLEAR_M, 85.0)  # reversed far enough: the rock is ahead, to the right
-    s = decision.Inputs(201.0, back, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
-    assert decision.mode_sample(r, nav, s).throttle >= 0 and nav.rock_target is not None
+    assert step(201.0, back).throttle >= 0 and nav.rock_target is not None
 
 
 def test_a_rock_never_seen_close_under_the_rover_is_given_up_at_once():
-    r = make_rover(pos=(110.0, 85.0), yaw=0.0, t=200.0)
-    nav = r.nav
-    nav.rock_target, nav.rock_since, nav.rock_close_since = (110.0, 84.7), 195.0, 196.0
-    nav.rock_seen_time, nav.rock_seen_close, nav.rock_came_close = 180.0, False, True
-    nav.stage_for, nav.stage_done = nav.rock_target, True
-    empty = np.zeros(0)
-    s = decision.Inputs(200.0, r.pos, 0.0, 0.0, *clear_view(), empty, empty, empty, empty, False, False, 1)
-    decision.mode_sample(r, nav, s)
+    nav, step = _rock_beside(seen_close=False, seen_time=180.0, lateral_m=0.3)
+    step(200.0)
     assert nav.rock_target is None
