@@ -288,7 +288,7 @@ class RoverTwinEnv(gym.Env):
         return "data", {"throttle": f"{throttle:.4f}", "brake": f"{brake:.4f}", "steering_angle": f"{steer:.4f}"}
 
     def _see(self) -> int:
-        r = self.twin._renderer
+        r = self.twin.renderer()
         origin, rot = r.camera(self.twin.pose())  # the camera of the frame just rendered
         return self.coverage.update(r.last_depth, origin, rot)
 

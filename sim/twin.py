@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.physics import MAX_STEER_DEG, PHYSICS_DT, Controls, RoverPhysics
+from sim.physics import MAX_STEER_DEG, PHYSICS_DT, Controls, RoverPhysics, delta_angle
 from sim.samples import PickupArm, near_index, spawn_samples
 
 log = logging.getLogger(__name__)
@@ -245,13 +245,20 @@ class RoverTwin:
         s = self.physics.state
         return (s.x, s.y, s.yaw, s.pitch, s.roll)
 
-    def render_rgb(self):
+    def renderer(self):
+        """The twin's renderer, built on first use (a twin made with render=False never bakes one)."""
         if self._renderer is None:
             from sim.render import Renderer
 
             self._renderer = Renderer(self.world)
+        return self._renderer
+
+    def _render_samples(self) -> tuple:
+        return tuple(smp.render_tuple() for smp in self.samples)
+
+    def render_rgb(self):
         from sim.tracks import tyre_tracks
-        return self._renderer.render(self.pose(), [smp.render_tuple() for smp in self.samples], tyre_tracks(self))
+        return self.renderer().render(self.pose(), self._render_samples(), tyre_tracks(self))
 
     def _image_b64(self) -> str:
         if not self.render_enabled:
@@ -271,7 +278,7 @@ class RoverTwin:
         if self._still_frame(pose, scene):
             self.reused_frames += 1
             return self._still[2]
-        rgb = self._renderer.render(pose, [smp.render_tuple() for smp in self.samples], tracks)
+        rgb = self._renderer.render(pose, scene[-1], tracks)
         self.last_rgb = rgb
         self.last_jpeg = encode_jpeg(rgb, quality=self.jpeg_quality)
         b64 = base64.b64encode(self.last_jpeg).decode("ascii")
@@ -279,15 +286,11 @@ class RoverTwin:
         return b64
 
     def _scene_key(self, tracks) -> tuple:
-        """Everything besides the pose that a render depends on and that can change during a run."""
-        if self._renderer is None:
-            from sim.render import Renderer
-
-            self._renderer = Renderer(self.world)
-        r = self._renderer
+        """Everything besides the pose that a render depends on and that can change during a run
+        (the samples last: `_image_b64` draws them from here)."""
+        r = self.renderer()
         settings = tuple(v for v in vars(r).values() if isinstance(v, (bool, int, float, str)))
-        return (id(r), settings, self.jpeg_quality, tracks.laid,
-                tuple(smp.render_tuple() for smp in self.samples))
+        return (id(r), settings, self.jpeg_quality, tracks.laid, self._render_samples())
 
     def _still_frame(self, pose, scene) -> bool:
         """True when the rover has not moved since the last rendered frame (the pickup arm's 10 s, a
@@ -300,7 +303,7 @@ class RoverTwin:
             return False
         if abs(pose[0] - last[0]) >= STILL_POSITION_M or abs(pose[1] - last[1]) >= STILL_POSITION_M:
             return False
-        return all(abs((a - b + 180.0) % 360.0 - 180.0) < STILL_ANGLE_DEG for a, b in zip(pose[2:], last[2:]))
+        return all(abs(delta_angle(b, a)) < STILL_ANGLE_DEG for a, b in zip(pose[2:], last[2:]))
 
     def telemetry(self) -> dict:
         """The simulator's telemetry for the current state (field order as the real one)."""
