@@ -310,7 +310,7 @@ def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_
     h, w = depth.shape
     min_foot = texel_m
     near2 = min_foot * focal_px * MIN_FOOT_HEIGHT_M
-    buf = np.empty((13, w))
+    buf = np.empty((4, w))  # stage 3's slopes (GX, GY, GR) and stage 4's footprint ratio, per pixel of the row
     CX, CY, AX, AY = np.empty(w), np.empty(w), np.empty(w), np.empty(w)
     T00, T01, T10, T11 = np.empty(w), np.empty(w), np.empty(w), np.empty(w)
     IDX = np.empty(w, np.int64)
@@ -328,8 +328,6 @@ def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_
     ox32, oy32, oz32 = np.float32(origin[0]), np.float32(origin[1]), np.float32(origin[2])
     r02_32, r12_32, r22_32 = np.float32(rot[0, 2]), np.float32(rot[1, 2]), np.float32(rot[2, 2])
     todo = np.empty(w, np.int64)  # the row's pixels in work: u (mip level, maybe lobe) or -1 - u (lobe only)
-    ox, oy, oz = origin[0], origin[1], origin[2]
-    r02, r12, r22 = rot[0, 2], rot[1, 2], rot[2, 2]
     for v in range(h):
         b0 = np.float32(rot[0, 1] * ray_b[v]) + r02_32
         b1 = np.float32(rot[1, 1] * ray_b[v]) + r12_32
@@ -366,7 +364,7 @@ def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_
         if m == 0:
             continue
         # stage 3: terrain height and slope under each; rock meshes drop out (neither term applies)
-        GX, GY, GR = buf[8], buf[9], buf[10]
+        GX, GY, GR = buf[0], buf[1], buf[2]
         for i in range(m):
             t = todo[i]
             u = t if t >= 0 else -1 - t
@@ -403,7 +401,7 @@ def apply_floor_look(img, depth, origin, rot, ray_a, ray_b, pyr, texel_m, focal_
             CY[n] = CY[i]
             n += not Z[u] > GR[i] + rock_above_m  # branch-free: a rock mesh's pixel is overwritten by the next
         # stage 4: footprint in texels (independent pixels: divisions overlap), then its mip level
-        RATIO = buf[12]
+        RATIO = buf[3]
         for i in range(n):
             t = todo[i]
             u = t if t >= 0 else 0
