@@ -872,15 +872,15 @@ def mode_sample(rover, nav, s):
         alpha, dist = nav.rock_bearing, nav.rock_dist
         reason = "sample-vision"
     else:
-        if not turning.bearing_usable(dist) and nav.rock_seen_close and not nav.rock_backed_off:
-            # the camera showed this rock from close: it is beside the rover, where near_sample stays off and
-            # the camera cannot see (held-out seed 89, shadows on, gave the east-nook rock up 0.5 m off it).
-            # Reverse straight once, so it comes back into view ahead
-            log.info("rock at (%.1f, %.1f) is beside the rover: backing off to see it again", *nav.rock_target)
-            nav.rock_backed_off = True
-            nav.rock_back_until = s.t + ROCK_BESIDE_BACK_S
-            return Command(stuck.BACK_OFF_THROTTLE, 0.0, 0.0)
         if not turning.bearing_usable(dist):
+            if nav.rock_seen_close and not nav.rock_backed_off:
+                # the camera showed this rock from close: it is beside the rover, where near_sample stays off and
+                # the camera cannot see (held-out seed 89, shadows on, gave the east-nook rock up 0.5 m off it).
+                # Reverse straight once (until ROCK_BESIDE_CLEAR_M, above), so it comes back into view ahead
+                log.info("rock at (%.1f, %.1f) is beside the rover: backing off to see it again", *nav.rock_target)
+                nav.rock_backed_off = True
+                nav.rock_back_until = s.t + ROCK_BESIDE_BACK_S
+                return Command(stuck.BACK_OFF_THROTTLE, 0.0, 0.0)
             # the remembered spot is under the rover, the camera does not show a rock and near_sample is
             # off: it is not there (seed 16 at 15 fps turned nine times toward such a spot, 0.1-0.4 m off)
             log.info("rock at (%.1f, %.1f) is under the rover and not in view: giving it up", *nav.rock_target)
