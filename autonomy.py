@@ -17,6 +17,7 @@ from typing import Callable, Dict, Optional, Tuple
 
 import numpy as np
 
+from interrupts import reraise_interrupt
 from rover_state import RoverState
 import supporting_functions as sf
 
@@ -246,7 +247,8 @@ class AutonomyClient:
         self.last_timings = timings
         try:
             reply = self._handle(data, timings)
-        except Exception:  # last line of defence; _handle already guards its steps
+        except Exception as exc:  # last line of defence; _handle already guards its steps
+            reraise_interrupt(exc)
             self.step_errors += 1
             self.warn("frame", "unexpected error handling telemetry; safe stop", exc_info=True)
             reply = self._safe_stop()
@@ -287,7 +289,8 @@ class AutonomyClient:
             t = time.perf_counter()
             self.decision_step(rover)
             timings["decision"] = (time.perf_counter() - t) * 1e3
-        except Exception:
+        except Exception as exc:
+            reraise_interrupt(exc)
             self.step_errors += 1
             self.warn("step", "perception/decision raised; safe stop", exc_info=True)
             rover.send_pickup = False
@@ -316,7 +319,8 @@ class AutonomyClient:
             t = time.perf_counter()
             try:
                 payload["inset_image1"], payload["inset_image2"] = sf.create_output_images(rover)
-            except Exception:
+            except Exception as exc:
+                reraise_interrupt(exc)
                 self.step_errors += 1
                 self.warn("insets", "inset rendering failed; command sent without insets",
                           exc_info=True)

@@ -43,6 +43,7 @@ from typing import Optional
 import numpy as np
 
 import perception
+from interrupts import reraise_interrupt
 from navigation import (approach, exploration_plan, explore, fixed_turn, grid, paths, predict, pursuit, reactive,
                         rock_choice, search_plan, stuck, turning)
 
@@ -257,7 +258,8 @@ def decision_step(rover):
         mode, cmd = _select_and_run(rover, nav, s)
         if s.pos is not None and mode in ("stop", "forward", "sample", "home", "search"):
             _check_spinning(nav, s, mode)
-    except Exception:  # a server must keep running: stop safely and log
+    except Exception as exc:  # a server must keep running: stop safely and log
+        reraise_interrupt(exc)  # ...but a Ctrl-C wrapped by a compiled kernel still stops it
         log.exception("decision_step failed; holding still")
         mode, cmd = "stop", Command(0.0, BRAKE_STOP, 0.0)
     _apply(rover, nav, mode, cmd, getattr(rover, "total_time", 0.0))
