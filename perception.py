@@ -98,7 +98,7 @@ LOOK_HALF_ANGLE_DEG = 40.0  # ...and only this far off the rover's heading, deg 
 
 # --- rocks ---
 ROCK_MAX_RANGE_M = 9.0  # rock detections farther than this are not remembered, m
-ROCK_TILT_GATE_DEG = 3.0  # rock positions are not remembered above this tilt, deg
+ROCK_TILT_GATE_DEG = 5.0  # rock positions are not remembered above this tilt, deg (the pose's pitch places them; a hard stop pitches ~4.3 deg while a nook's sample shows: 3.0 lost seed 15's at 15 fps)
 ROCK_MERGE_RADIUS_M = 2.0  # detections closer than this to a known rock refine it, m
 ROCK_MIN_HITS = 3  # detections needed before a rock is reported in rocks_world
 ROCK_SUPPRESS_RADIUS_M = 5.0  # a weak cluster this close to a much stronger one is an echo of it, m

@@ -101,6 +101,36 @@ def test_rock_raised_on_a_slope_is_placed_by_its_width_not_its_base():
     assert r.rock_dists.max() <= capped + 0.3
 
 
+@pytest.mark.parametrize("pitch", [-4.3, 4.3])
+def test_a_rock_seen_while_the_body_pitches_after_a_hard_stop_is_remembered_where_it_lies(pitch):
+    # braking from 3.5 m/s pitches the body ~4.3 deg nose-down for the second or so a sample in a nook
+    # shows (seed 15, 15 fps: three frames of 3-5 gold px at 4.5 m, then the turn back); the pose's
+    # pitch places the blob, so those frames count (up to ROCK_TILT_GATE_DEG)
+    _, v_base, _ = P.rover_to_pixel(4.0, 0.0, pitch_deg=pitch)
+    base = int(v_base)  # the row the floor point falls in (rows 0.4 m apart here)
+    img = _synthetic()
+    img[base - 3:base + 1, 158:162] = (230, 195, 15)
+    r = _rover(img, pos=(100.0, 100.0), yaw=0.0, pitch=pitch % 360.0)
+    for _ in range(P.ROCK_MIN_HITS):
+        P.perception_step(r)
+    assert not r.map_updated  # the map still skips the tilted frames
+    assert len(r.rocks_world) == 1
+    x, y = r.rocks_world[0]
+    assert x == pytest.approx(104.0, abs=0.3) and y == pytest.approx(100.0, abs=0.2)
+
+
+def test_a_rock_seen_from_a_steeper_tilt_is_not_remembered():
+    pitch = P.ROCK_TILT_GATE_DEG + 1.0
+    _, v_base, _ = P.rover_to_pixel(4.0, 0.0, pitch_deg=pitch)
+    base = int(v_base)
+    img = _synthetic()
+    img[base - 3:base + 1, 158:162] = (230, 195, 15)
+    r = _rover(img, pos=(100.0, 100.0), yaw=0.0, pitch=pitch)
+    for _ in range(P.ROCK_MIN_HITS + 2):
+        P.perception_step(r)
+    assert r.rock_angles.size > 0 and r.rocks_world == []  # steered toward, never remembered
+
+
 def test_perception_step_fills_rover_fields():
     r = P.perception_step(_rover(_synthetic(), pos=(100.0, 90.0), yaw=45.0))
     assert r.map_updated
