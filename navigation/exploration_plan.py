@@ -88,7 +88,8 @@ def _dead_end_look(nav, s, free, dist, frontier_cells):
         return None
     if not _turns_back(frontier_cells, s):
         return None
-    targets = explore.look_targets(nav.unsearched, free, nav.visits.visited(), nav.look_done, dist,
+    anywhere = np.ones_like(free)  # not only wall feet near the trail: at a tip the rover stops 5-6 m short of its end
+    targets = explore.look_targets(nav.unsearched, free, anywhere, nav.look_done, dist,
                                    nav.look_stand_done | nav.dead_end_done)
     if not len(targets):
         return None

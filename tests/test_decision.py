@@ -711,9 +711,10 @@ def test_a_rock_never_seen_close_under_the_rover_is_given_up_at_once():
     assert nav.rock_target is None
 
 
-def _rover_near_a_closed_tip(x=126.5, yaw=0.0):
+def _rover_near_a_closed_tip(x=124.6, yaw=0.0):
     """make_rover's corridor turned into an arm's tip: closed east at x 130, open west (the only frontier,
-    behind a rover facing east). Every wall foot was looked at from close except the tip's end wall."""
+    behind a rover facing east). Every wall foot was looked at from close except the tip's end wall, 6 m
+    beyond the trail's end (farther than the search's look targets reach: explore.SEARCH_LOOK_TRAIL_M)."""
     import perception
     r = make_rover(pos=(x, 85.5), yaw=yaw, t=200.0)
     r.worldmap[79:92, 89, 0] = 0  # the west end opens onto unmapped ground
@@ -723,14 +724,15 @@ def _rover_near_a_closed_tip(x=126.5, yaw=0.0):
     mem = perception.get_memory(r)
     mem.look_range[:] = 1.0
     mem.look_range[78:93, 130] = np.inf  # the tip's end wall: seen from afar only
-    for col in range(100, 127):
+    for col in range(100, 125):
         r.nav.visits.update(100.0 + col, (85, col))
     return r
 
 
 def test_an_arm_tip_s_unsearched_wall_feet_are_looked_at_before_the_path_turns_back():
     """Seed 0: the rover drove at the north-tip sample, turned back 6.5 m short of it (2-4 gold px) and
-    the nearest-first search never came back to the tip in 340 s."""
+    the nearest-first search never came back to the tip in 340 s (at 15 fps: 5.8 m short, and the search's
+    look targets, within 5 m of the trail, did not hold the tip's end wall)."""
     r = _rover_near_a_closed_tip()
     s = decision._read_inputs(r)
     exploration_plan.plan_explore(r, r.nav, s)
@@ -743,7 +745,7 @@ def test_an_arm_tip_s_unsearched_wall_feet_are_looked_at_before_the_path_turns_b
 
 @pytest.mark.parametrize("case", ["all samples in", "stand too far", "frontier ahead"])
 def test_no_dead_end_look_without_samples_missing_far_stands_or_a_path_going_on(case):
-    r = _rover_near_a_closed_tip(x=118.5 if case == "stand too far" else 126.5,
+    r = _rover_near_a_closed_tip(x=118.5 if case == "stand too far" else 124.6,
                                  yaw=180.0 if case == "frontier ahead" else 0.0)
     if case == "all samples in":
         r.samples_remaining = 0
