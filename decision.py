@@ -65,7 +65,6 @@ TURN_IN_PLACE_SPEED_MPS = 0.3  # the simulator turns in place only below 0.316 m
 # --- heading / turning ----------------------------------------------------------------
 ROTATE_ENTER_DEG = 90.0  # a wanted heading further off than this is reached by turning in place, degrees
 LEAVE_PICKUP_ROTATE_DEG = 30.0  # leaving a pickup spot (samples lie at wall feet), turn in place first when the way on is further off than this, degrees
-EXPLORE_GOAL_KINDS = ("frontier", "dead-end")  # path goals of exploration: a frontier, or a look stand before a path turns back (exploration_plan._dead_end_look)
 SWEEP_REASONS = ("path-behind", "leave-pickup")  # long turns in place that may go the long way round to sweep the camera over unsearched wall feet (explore.sweep_direction)
 GLANCE_REASONS = ("path-behind",)  # turns in place that may glance first at unsearched wall feet (explore.glance_heading): a path doubling back, not leaving a pickup (samples lie >= 5 m apart; glancing there too cost seeds 0, 3, 7 time)
 GLANCE_DEAD_END_REACH_M = 5.0  # ...and only at a dead end: no rover-wide corridor this long in the camera's view, m
@@ -192,7 +191,7 @@ class NavMemory:
         # planning
         self.path_xy = np.zeros((0, 2))
         self.path_idx = 0
-        self.path_goal = None  # ("frontier" | "dead-end" | "rock" | "home" | a search kind, (row, col))
+        self.path_goal = None  # ("frontier" | "rock" | "home", (row, col))
         self.plan_time = -math.inf
         self.frontier_ignored = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
         self.frontier_abandoned = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # ignored because given up, not reached
@@ -208,7 +207,6 @@ class NavMemory:
         self.search_faces = 0  # ...and how many turns it made there
         self.in_sight = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # cells a clear line of sight reached within SEARCH_LOOK_M (explore.mark_in_sight)
         self.look_stand_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # look stands already reached
-        self.dead_end_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # around dead-end look stands reached or given up (exploration_plan._dead_end_look)
         self.look_done = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # wall feet given up (faced LOOK_TRIES times unseen, or a stuck beside them)
         self.look_tries = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), np.int16)  # look stands each unsearched wall foot was faced from
         self.goal_best = math.inf
@@ -565,8 +563,6 @@ def _abandon_goal(nav, s):
         rock_choice.give_up_rock(nav, s)
     elif nav.path_goal is not None and nav.path_goal[0] == "frontier" and nav.path_goal[1] is not None:
         exploration_plan.give_up_frontier(nav)
-    elif nav.path_goal is not None and nav.path_goal[0] == "dead-end":
-        exploration_plan.dead_end_look_done(nav)
     nav.path_goal = None
     nav.plan_time = -math.inf
 
@@ -785,15 +781,8 @@ def mode_done(nav, s):
 
 def mode_forward(rover, nav, s):
     """Explore: follow a path to the best frontier; without a plan, hug the left wall."""
-    if nav.path_goal is None or nav.path_goal[0] not in EXPLORE_GOAL_KINDS or paths.needs_replan(nav, s):
+    if nav.path_goal is None or nav.path_goal[0] != "frontier" or paths.needs_replan(nav, s):
         exploration_plan.plan_explore(rover, nav, s)
-    if nav.path_goal is not None and nav.path_goal[0] == "dead-end" and len(nav.path_xy) >= 2:
-        goal_xy = grid.cell_to_world(*nav.path_goal[1])
-        if (math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < exploration_plan.FRONTIER_REACHED_M
-                or paths.goal_stalled(nav, s)):
-            exploration_plan.dead_end_look_done(nav)
-            nav.plan_time = -math.inf
-        return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
     if nav.path_goal is not None and nav.path_goal[0] == "frontier" and len(nav.path_xy) >= 2:
         goal_xy = grid.cell_to_world(*nav.path_goal[1])
         if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < exploration_plan.FRONTIER_REACHED_M:

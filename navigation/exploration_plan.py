@@ -11,8 +11,6 @@ here. Functions take the rover, its `nav` memory (decision.NavMemory) and the fr
 import logging
 import math
 
-import numpy as np
-
 import perception
 from navigation import astar, explore, grid, paths, search_plan, vanished
 
@@ -24,12 +22,6 @@ VANISHED_REACH_M = 3.0  # a frontier goal voted wall before it was seen from clo
 POCKET_TOUR_S = 120.0  # exploration looks into faint pockets (nearest first) for at most this long after it first ran out of frontier with samples missing, then leaves the rest to the sample search (a sample in no pocket waited for every pocket's tour); two or three cross-canyon drives, s
 EXPLORED_CONFIRM_PLANS = 3  # plans in a row without any frontier before the map counts as complete
 EXPLORED_MIN_TIME_S = 20.0  # never declare the map complete before this, s
-DEAD_END_LOOK_M = 6.0  # before a frontier path turns back, unsearched wall feet whose stand is this near (straight line) are looked at first, m
-DEAD_END_LOOK_MAX_COST = 18.0  # ...and no dearer than this by path (grid.cost_grid units: 1 a metre in the open, more beside walls; a stand lies beside one), cost
-DEAD_END_LOOK_HALF_DEG = 60.0  # ...when the stand lies within this of the heading (ahead: the rover is not coming back), deg
-DEAD_END_BEHIND_DEG = 90.0  # a frontier path "turns back" when its first point DEAD_END_PATH_AHEAD_M on is this far off the heading, deg
-DEAD_END_PATH_AHEAD_M = 2.0  # ...that point's distance from the rover, m
-DEAD_END_DONE_M = 6.0  # a reached (or given-up) dead-end stand rules out dead-end looks this close (the wall feet stay open for the search), m
 
 
 def plan_explore(rover, nav, s):
@@ -65,60 +57,7 @@ def plan_explore(rover, nav, s):
         return
     nav.no_frontier_plans = 0
     nav.explored = False
-    cells = astar.path_to(parent, cost.shape, goal)
-    look = _dead_end_look(nav, s, free, dist, cells)
-    if look is not None:
-        if nav.path_goal != ("dead-end", look):
-            log.info("looking at unsearched wall feet from %s before turning back at (%.1f, %.1f), t=%.1f",
-                     look, s.pos[0], s.pos[1], s.t)
-        paths.set_path(nav, s, "dead-end", look, astar.path_to(parent, cost.shape, look))
-        return
-    paths.set_path(nav, s, "frontier", goal, cells)
-
-
-def _dead_end_look(nav, s, free, dist, frontier_cells):
-    """A look stand (explore.look_targets) ahead within DEAD_END_LOOK_M (and DEAD_END_LOOK_MAX_COST by
-    path), to drive to before a frontier path that turns back, with samples missing; else None.
-
-    At an arm's tip the frontier closes once its walls were seen from SEEN_CLOSE_SAMPLES_M, but a sample
-    there shows only from a few metres: on seed 0 the rover drove straight at the north-tip sample,
-    turned back 6.5 m short of it (2-4 gold pixels) and the search, nearest first, never came back to
-    the tip in 340 s. Looking now costs a few metres; coming back costs a crossing of the canyon."""
-    if not search_plan.samples_missing(s) or nav.unsearched is None or dist is None:
-        return None
-    if not _turns_back(frontier_cells, s):
-        return None
-    anywhere = np.ones_like(free)  # not only wall feet near the trail: at a tip the rover stops 5-6 m short of its end
-    targets = explore.look_targets(nav.unsearched, free, anywhere, nav.look_done, dist,
-                                   nav.look_stand_done | nav.dead_end_done)
-    if not len(targets):
-        return None
-    rows, cols, cost = targets[:, 0], targets[:, 1], targets[:, 2]
-    dx, dy = cols + 0.5 - s.pos[0], rows + 0.5 - s.pos[1]
-    off = np.abs((np.degrees(np.arctan2(dy, dx)) - s.yaw + 180.0) % 360.0 - 180.0)
-    ok = (np.hypot(dx, dy) <= DEAD_END_LOOK_M) & (cost <= DEAD_END_LOOK_MAX_COST) & (off <= DEAD_END_LOOK_HALF_DEG)
-    if not ok.any():
-        return None
-    k = int(np.flatnonzero(ok)[np.argmin(cost[ok])])
-    return int(rows[k]), int(cols[k])
-
-
-def _turns_back(cells, s):
-    """Whether a path of (row, col) cells leaves the way the rover came: its first cell at least
-    DEAD_END_PATH_AHEAD_M away (else its last) lies more than DEAD_END_BEHIND_DEG off the heading."""
-    if len(cells) < 2:
-        return False
-    xy = astar.cells_to_world(cells)
-    far = np.hypot(xy[:, 0] - s.pos[0], xy[:, 1] - s.pos[1]) >= DEAD_END_PATH_AHEAD_M
-    x, y = xy[int(np.argmax(far))] if far.any() else xy[-1]
-    bearing = math.degrees(math.atan2(y - s.pos[1], x - s.pos[0]))
-    return abs((bearing - s.yaw + 180.0) % 360.0 - 180.0) > DEAD_END_BEHIND_DEG
-
-
-def dead_end_look_done(nav):
-    """The dead-end look stand is reached (or given up): no dead-end look again within DEAD_END_DONE_M.
-    Wall feet still unseen from there (a nook's back) stay open for the sample search."""
-    explore.ignore_disc(nav.dead_end_done, nav.path_goal[1], DEAD_END_DONE_M)
+    paths.set_path(nav, s, "frontier", goal, astar.path_to(parent, cost.shape, goal))
 
 
 def _frontier_targets(rover, nav, s, free, obstacle, mask):
