@@ -37,6 +37,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from drive_rover import add_home_by_option
+from interrupts import caused_by_interrupt
 from sim.backend import add_backend_options, evaluate_tasks
 from sim.cli import (INTERRUPTED_EXIT, add_shadows_option, check_paths, parse_with_logging, positive_int,
                      positive_number, tool_parser)
@@ -183,6 +184,8 @@ def _run_seed(args):
     except KeyboardInterrupt:  # Ctrl-C outside the mission loop (loading, scoring): nothing to write
         return {"seed": seed, "end_reason": "interrupted before any result"}
     except Exception as exc:  # one bad seed must not sink the batch
+        if caused_by_interrupt(exc):  # a Ctrl-C a numba kernel wrapped in a SystemError
+            return {"seed": seed, "end_reason": "interrupted before any result"}
         logging.getLogger(__name__).exception("seed %d failed", seed)
         return {"seed": seed, "end_reason": f"error: {type(exc).__name__}: {exc}",
                 "wall_s": round(time.perf_counter() - t0, 1)}

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from dashboard import add_dashboard_options
+from interrupts import caused_by_interrupt
 from drive_rover import add_home_by_option
 from sim.cli import (INTERRUPTED_EXIT, add_shadows_option, check_paths, parse_with_logging, positive_number,
                      seed_number, tool_parser)
@@ -230,7 +231,9 @@ def run_inprocess(world, seed, time_limit=TIME_LIMIT_S, video=None, record=None,
             if getattr(client.rover, "mission_complete", False):
                 end_reason, completed = "mission complete", True
                 break
-    except KeyboardInterrupt:  # Ctrl-C: stop here and let the caller write what we have
+    except BaseException as exc:  # Ctrl-C (also wrapped by a numba kernel): stop here, the caller writes what we have
+        if not caused_by_interrupt(exc):
+            raise
         end_reason = INTERRUPTED
         log.warning("Ctrl-C at %.0f s simulated: writing the partial mission", twin.sim_time)
     finally:

@@ -40,6 +40,7 @@ import time
 from pathlib import Path
 
 from dashboard import add_dashboard_options
+from interrupts import reraise_interrupt
 from sim.cli import check_paths, non_negative_int, parse_with_logging, port_number, seed_number, tool_parser
 from sim.mission_parts import TruthTrack, all_collected_and_home, open_recorder, progress_bar
 from sim.timing import UNITY_FPS, WIRE_LATENCY_MS, Timing
@@ -181,7 +182,8 @@ class WireSimulator:
         except CommandError as exc:
             self.rejected += 1
             log.warning("no telemetry reply (the real simulator would stall): %s", exc)
-        except Exception:  # a twin bug must not kill the simulator: Unity logs and carries on
+        except Exception as exc:  # a twin bug must not kill the simulator: Unity logs and carries on
+            reraise_interrupt(exc)  # ...but a Ctrl-C a numba kernel wrapped still stops the run
             self.rejected += 1
             log.exception("error handling %r; no telemetry reply", event)
         return None

@@ -189,6 +189,34 @@ def test_ctrl_c_in_a_mission_writes_the_partial_mission(tmp_path):
     assert png.shape[1] == 800 and png.shape[0] > 800  # the map plus a title with the figures and a legend
 
 
+class _WrappedCtrlCAfter(_CtrlCAfter):
+    """...raised the way numba passes it on: a SystemError caused by the KeyboardInterrupt."""
+
+    def observe(self, client, event=None, force=False):
+        try:
+            super().observe(client, event, force)
+        except KeyboardInterrupt as exc:
+            raise SystemError("CPUDispatcher returned a result with an exception set") from exc
+
+
+def test_ctrl_c_wrapped_by_a_compiled_kernel_still_writes_the_partial_mission(tmp_path):
+    r = mission.run_mission(seed=1, world="procedural:0", time_limit=300, out=tmp_path, progress=False,
+                            watchers=[_WrappedCtrlCAfter(50)])
+    saved = json.loads((tmp_path / "mission.json").read_text())
+    assert r["end_reason"] == saved["end_reason"] == mission.INTERRUPTED
+    assert 40 <= saved["frames"] <= 60
+
+
+def test_a_mission_error_that_is_not_an_interrupt_still_propagates(tmp_path):
+    class Broken(_CtrlCAfter):
+        def observe(self, client, event=None, force=False):
+            raise SystemError("a real bug")
+
+    with pytest.raises(SystemError):
+        mission.run_mission(seed=1, world="procedural:0", time_limit=300, out=tmp_path, progress=False,
+                            watchers=[Broken(50)])
+
+
 def test_ctrl_c_in_an_evaluation_keeps_finished_and_partial_missions(monkeypatch, tmp_path):
     real = mission.run_mission
 
