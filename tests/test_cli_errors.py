@@ -175,12 +175,18 @@ class _CtrlCAfter:
             raise KeyboardInterrupt
 
 
-def test_ctrl_c_in_a_mission_writes_the_partial_mission(tmp_path):
+def _mission_stopped_by(watcher, tmp_path):
+    """Run a short mission that `watcher` interrupts after ~50 frames; its saved mission.json."""
     r = mission.run_mission(seed=1, world="procedural:0", time_limit=300, out=tmp_path, progress=False,
-                            watchers=[_CtrlCAfter(50)])
+                            watchers=[watcher])
     saved = json.loads((tmp_path / "mission.json").read_text())
     assert r["end_reason"] == saved["end_reason"] == mission.INTERRUPTED
     assert 40 <= saved["frames"] <= 60
+    return saved
+
+
+def test_ctrl_c_in_a_mission_writes_the_partial_mission(tmp_path):
+    saved = _mission_stopped_by(_CtrlCAfter(50), tmp_path)
     assert (tmp_path / "timeline.npz").exists()
     assert saved["time_limit_s"] == 300 and saved["code_version"] and saved["timing"] and saved["seed"] == 1
     import cv2
@@ -200,11 +206,7 @@ class _WrappedCtrlCAfter(_CtrlCAfter):
 
 
 def test_ctrl_c_wrapped_by_a_compiled_kernel_still_writes_the_partial_mission(tmp_path):
-    r = mission.run_mission(seed=1, world="procedural:0", time_limit=300, out=tmp_path, progress=False,
-                            watchers=[_WrappedCtrlCAfter(50)])
-    saved = json.loads((tmp_path / "mission.json").read_text())
-    assert r["end_reason"] == saved["end_reason"] == mission.INTERRUPTED
-    assert 40 <= saved["frames"] <= 60
+    _mission_stopped_by(_WrappedCtrlCAfter(50), tmp_path)
 
 
 def test_a_mission_error_that_is_not_an_interrupt_still_propagates(tmp_path):
