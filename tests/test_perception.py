@@ -70,14 +70,19 @@ def test_no_rock_in_grid_image():
     assert r.rock_angles.size == 0 and r.rocks_world == []
 
 
-def _remembered_gold_blob(base_ahead_m, height_px, cols):
-    """Rover at (100, 100) facing east sees a gold blob whose bottom row would be on the floor
-    base_ahead_m ahead; returns the rover and the one remembered rock position."""
-    _, v_base, _ = P.rover_to_pixel(base_ahead_m, 0.0)
+def _rover_seeing_gold_blob(base_ahead_m, height_px, cols, pitch=0.0):
+    """Rover at (100, 100) facing east, its body pitched `pitch` deg, sees a gold blob whose bottom row
+    falls in the pixel row of the floor base_ahead_m ahead."""
+    _, v_base, _ = P.rover_to_pixel(base_ahead_m, 0.0, pitch_deg=pitch)
     base = int(v_base)
     img = _synthetic()
     img[base - height_px + 1:base + 1, cols[0]:cols[1]] = (230, 195, 15)
-    r = _rover(img, pos=(100.0, 100.0), yaw=0.0)
+    return _rover(img, pos=(100.0, 100.0), yaw=0.0, pitch=pitch % 360.0)
+
+
+def _remembered_gold_blob(base_ahead_m, height_px, cols):
+    """_rover_seeing_gold_blob, level; returns the rover and the one remembered rock position."""
+    r = _rover_seeing_gold_blob(base_ahead_m, height_px, cols)
     for _ in range(P.ROCK_MIN_HITS):
         P.perception_step(r)
     assert len(r.rocks_world) == 1
@@ -106,11 +111,7 @@ def test_a_rock_seen_while_the_body_pitches_after_a_hard_stop_is_remembered_wher
     # braking from 3.5 m/s pitches the body ~4.3 deg nose-down for the second or so a sample in a nook
     # shows (seed 15, 15 fps: three frames of 3-5 gold px at 4.5 m, then the turn back); the pose's
     # pitch places the blob, so those frames count (up to ROCK_TILT_GATE_DEG)
-    _, v_base, _ = P.rover_to_pixel(4.0, 0.0, pitch_deg=pitch)
-    base = int(v_base)  # the row the floor point falls in (rows 0.4 m apart here)
-    img = _synthetic()
-    img[base - 3:base + 1, 158:162] = (230, 195, 15)
-    r = _rover(img, pos=(100.0, 100.0), yaw=0.0, pitch=pitch % 360.0)
+    r = _rover_seeing_gold_blob(4.0, 4, (158, 162), pitch)  # the floor row, not the nearest: rows lie 0.4 m apart here
     for _ in range(P.ROCK_MIN_HITS):
         P.perception_step(r)
     assert not r.map_updated  # the map still skips the tilted frames
@@ -120,12 +121,7 @@ def test_a_rock_seen_while_the_body_pitches_after_a_hard_stop_is_remembered_wher
 
 
 def test_a_rock_seen_from_a_steeper_tilt_is_not_remembered():
-    pitch = P.ROCK_TILT_GATE_DEG + 1.0
-    _, v_base, _ = P.rover_to_pixel(4.0, 0.0, pitch_deg=pitch)
-    base = int(v_base)
-    img = _synthetic()
-    img[base - 3:base + 1, 158:162] = (230, 195, 15)
-    r = _rover(img, pos=(100.0, 100.0), yaw=0.0, pitch=pitch)
+    r = _rover_seeing_gold_blob(4.0, 4, (158, 162), P.ROCK_TILT_GATE_DEG + 1.0)
     for _ in range(P.ROCK_MIN_HITS + 2):
         P.perception_step(r)
     assert r.rock_angles.size > 0 and r.rocks_world == []  # steered toward, never remembered
