@@ -181,10 +181,8 @@ def _run_seed(args):
     try:
         return run_mission(seed, _WORLD, out=Path(out) / f"seed-{seed}", progress=False, watchers=watchers,
                            **options.run_kwargs())
-    except KeyboardInterrupt:  # Ctrl-C outside the mission loop (loading, scoring): nothing to write
-        return {"seed": seed, "end_reason": "interrupted before any result"}
-    except Exception as exc:  # one bad seed must not sink the batch
-        if caused_by_interrupt(exc):  # a Ctrl-C a numba kernel wrapped in a SystemError
+    except (KeyboardInterrupt, Exception) as exc:  # one bad seed must not sink the batch
+        if caused_by_interrupt(exc):  # Ctrl-C outside the mission loop (loading, scoring; maybe wrapped by numba)
             return {"seed": seed, "end_reason": "interrupted before any result"}
         logging.getLogger(__name__).exception("seed %d failed", seed)
         return {"seed": seed, "end_reason": f"error: {type(exc).__name__}: {exc}",

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from dashboard import add_dashboard_options
-from interrupts import caused_by_interrupt
 from drive_rover import add_home_by_option
+from interrupts import caused_by_interrupt
 from sim.cli import (INTERRUPTED_EXIT, add_shadows_option, check_paths, parse_with_logging, positive_number,
                      seed_number, tool_parser)
 from sim.mission_parts import (HOME_RADIUS_M, StuckMeter, TruthTrack, nan_to_none, open_recorder,  # noqa: F401
