@@ -6,9 +6,10 @@
 
 Whole missions reach a hard spot (the east nook between two rocks, the hub's south-west pocket,
 the north arm's tip) in one or two ways per seed, so twenty seeds try its approach a handful of
-times. Here the rover starts on true floor at each radius and bearing around the spot, facing the
-spot and facing away, with a fresh client (empty map), in the real world with a sample at the spot,
-under Unity timing at 30 fps (no sim_time). A start counts as collected when the twin's arm picks
+times. Here a fresh client (empty map) is first shown the sample for a second from a stand where the
+camera sees it, as a mission's rover has seen a sample it goes for. The body is then moved to a start
+on true floor at each radius and bearing around the spot, facing the spot and facing away, in the real
+world with that one sample, under Unity timing at 30 fps (no sim_time). A start counts as collected when the twin's arm picks
 up that sample within --time-limit simulated seconds. Printed: collected / starts per shadow
 setting and radius, median and worst time to collect, stuck time, and the starts that failed.
 The figure to compare is the collected share; a change to the approach is measured by running
@@ -120,7 +121,7 @@ def run_start(args):
     return dict(radius_m=r, bearing_deg=bearing, x=round(x, 2), y=round(y, 2), yaw=round(yaw, 1), facing=facing,
                 shadows=shadows, collected=collected_at is not None,
                 time_s=None if collected_at is None else round(collected_at, 1), stuck_s=round(meter.total_s, 1),
-                end=(round(st.x, 1), round(st.y, 1)))
+                end=(round(float(st.x), 1), round(float(st.y), 1)))
 
 
 def _show_sample(client, loop, world, spot_xy, view):
