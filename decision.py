@@ -227,6 +227,7 @@ class NavMemory:
         self.stage = None  # (x, y, heading) to line up at before the final run to the rock, or None: straight in
         self.stage_for = None  # the rock target (x, y) the approach was decided for, or None: not decided
         self.stage_done = False  # the staging point was reached and the rover faced the rock
+        self.stages_wedged = []  # (rock x, y, stage x, y): staging points whose approach wedged (not chosen again for that rock)
         self.collected = []  # world (x, y) of collected samples
         self.rock_skip = []  # (x, y, until_t)
         self.rock_refuted = []  # (x, y, best_pixels): approached and not found (navigation.rockmem)
@@ -618,6 +619,8 @@ def _begin_recovery(nav, s, why, noticed_after_s):
     nav.progress.reset()
     nav.rotate_heading = nav.rotate_via = None
     nav.plan_time = -math.inf  # replan around the blocked cells
+    if nav.stage is not None and nav.stage_for is not None and nav.mode == "sample":
+        nav.stages_wedged.append((*nav.stage_for, *nav.stage[:2]))
     nav.stage_for = None  # a rock approach that wedged is decided again, around the stuck cells
     log.info("%s at (%.1f, %.1f) t=%.1f, repeat %d, escaping %s", why, s.pos[0], s.pos[1], s.t, repeat,
              "left" if sign > 0 else "right")
@@ -930,7 +933,10 @@ def _stage_approach(rover, nav, s, dist):
         # rock): seed 37 (15 fps) wedged twice at the east nook, and the close timer ran out as it drove
         # to the third staging point, the one that works; it came back 70 s later and collected from there
         nav.rock_close_since = None
-        nav.stage = approach.plan_approach(free, paths.blocked_cells(nav, s), nav.rock_target, _arrival_point(nav, s))
+        wedged = [(x, y) for rx, ry, x, y in nav.stages_wedged
+                  if math.hypot(rx - nav.rock_target[0], ry - nav.rock_target[1]) <= rock_choice.ROCK_SAME_M]
+        nav.stage = approach.plan_approach(free, paths.blocked_cells(nav, s), nav.rock_target, _arrival_point(nav, s),
+                                           wedged_stages=wedged)
         if nav.stage is not None:
             log.info("rock at (%.1f, %.1f): lining up at (%.1f, %.1f) first", *nav.rock_target, *nav.stage[:2])
     if nav.stage is None or nav.stage_done:

@@ -28,6 +28,7 @@ SHARE_WEIGHT = 4.0  # score per unit of free share of the run in (ranks directio
 LINE_STEP_M = 0.25  # spacing of the checked points along a run, m
 SIDE_PREFERENCE = 0.5  # score bonus per unit cosine toward the rover's own side (fewer detours), 0..
 WEDGED_NEAR_M = 4.0  # stuck cells this close to the sample mean the last approach wedged there, m
+STAGE_WEDGED_DEG = 45.0  # no staging direction within this of one whose approach wedged is tried again for that sample (seen from the sample), degrees
 
 
 def _free_at(free: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
@@ -83,13 +84,13 @@ def direct_run_clear(free: np.ndarray, rover_xy, sample_xy) -> bool:
 
 
 def staging_point(free: np.ndarray, sample_xy, rover_xy=None,
-                  standoff_m: float = STANDOFF_M) -> Optional[Tuple[float, float, float]]:
+                  standoff_m: float = STANDOFF_M, wedged_stages=()) -> Optional[Tuple[float, float, float]]:
     """(x, y, heading_deg) to line up at: standoff_m from the sample, facing it, with a clear run in.
 
     Directions are ranked by the free share of their run in (from SAMPLE_CLEAR_M out to
     standoff_m + a margin; at least STAGE_MIN_SHARE, the staging cell itself free), then by
-    the free room behind the staging point, nudged toward the rover's own side.  None when
-    no direction qualifies.
+    the free room behind the staging point, nudged toward the rover's own side.  Directions within
+    STAGE_WEDGED_DEG of a staging point in wedged_stages are skipped.  None when no direction qualifies.
     """
     sx, sy = float(sample_xy[0]), float(sample_xy[1])
     if not (math.isfinite(sx) and math.isfinite(sy)):
@@ -108,6 +109,9 @@ def staging_point(free: np.ndarray, sample_xy, rover_xy=None,
         share = corridor_share(free, inner, (sx + ux * (standoff_m + 0.5), sy + uy * (standoff_m + 0.5)))
         if share < STAGE_MIN_SHARE or not _free_at(free, np.array([stage[0]]), np.array([stage[1]]))[0]:
             continue
+        if any(abs((math.degrees(a - math.atan2(wy - sy, wx - sx)) + 180.0) % 360.0 - 180.0) <= STAGE_WEDGED_DEG
+               for wx, wy in wedged_stages):
+            continue
         room = 0.0  # free run behind the staging point: room to arrive and turn
         for extra in (1.0, 2.0, 3.0):
             if corridor_share(free, stage, (stage[0] + ux * extra, stage[1] + uy * extra)) < RUN_CLEAR_SHARE:
@@ -120,7 +124,7 @@ def staging_point(free: np.ndarray, sample_xy, rover_xy=None,
     return best
 
 
-def plan_approach(free: np.ndarray, blocked: np.ndarray, sample_xy, arrival_xy
+def plan_approach(free: np.ndarray, blocked: np.ndarray, sample_xy, arrival_xy, wedged_stages=()
                   ) -> Optional[Tuple[float, float, float]]:
     """Staging point (x, y, heading_deg) for the final run to a sample, or None: straight in.
 
@@ -128,15 +132,17 @@ def plan_approach(free: np.ndarray, blocked: np.ndarray, sample_xy, arrival_xy
     beside the east nook map as floor, and the rover wedged on them from the south again and
     again.  Once it wedged near this sample and no staging point is left on mapped floor, the
     opening is taken to be narrower than a map cell: staging may then use cells next to mapped
-    floor (the nook's real opening reads as wall foot on the 1 m map).
+    floor (the nook's real opening reads as wall foot on the 1 m map).  A staging point whose
+    approach already wedged (``wedged_stages``, world x, y) is not chosen again: the gap between the
+    east nook's two rocks maps as floor, and the same point there was chosen four times in a row.
     """
     usable = free & ~blocked
     if direct_run_clear(usable, arrival_xy, sample_xy):
         return None
-    stage = staging_point(usable, sample_xy, arrival_xy)
-    if stage is None and _blocked_near(blocked, sample_xy):
+    stage = staging_point(usable, sample_xy, arrival_xy, wedged_stages=wedged_stages)
+    if stage is None and (_blocked_near(blocked, sample_xy) or wedged_stages):
         grown = cv2.dilate(free.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-        stage = staging_point(grown & ~blocked, sample_xy, arrival_xy)
+        stage = staging_point(grown & ~blocked, sample_xy, arrival_xy, wedged_stages=wedged_stages)
     return stage
 
 
