@@ -246,6 +246,47 @@ def test_a_nook_approach_that_wedged_is_replanned_from_the_open_side():
     assert approach.plan_approach(free, far_blocked, sample, arrival) is None
 
 
+def _gap_nook():
+    """East-nook pattern with two ways in: false floor south of the sample (wide, ranked first) and the real
+    opening west of it (narrower)."""
+    free = np.zeros((200, 200), bool)
+    free[80:101, 100:120] = True  # open floor west and south-west
+    free[80:90, 120:126] = True  # false floor south of the sample (the gap between two rocks)
+    free[90:92, 119:121] = True  # the real opening, west of the sample
+    return free, (121.8, 91.0)
+
+
+def test_a_staging_side_whose_approach_wedged_is_not_chosen_again():
+    free, sample = _gap_nook()
+    first = approach.staging_point(free, sample, (123.0, 84.0))
+    assert first is not None and first[1] < sample[1] - 1.5  # the wide false floor to the south wins at first
+    again = approach.staging_point(free, sample, (123.0, 84.0), wedged_stages=[first[:2]])
+    assert again is not None
+    bearing = math.degrees(math.atan2(again[1] - sample[1], again[0] - sample[0]))
+    wedged = math.degrees(math.atan2(first[1] - sample[1], first[0] - sample[0]))
+    assert abs(predict.wrap_deg(bearing - wedged)) > approach.STAGE_WEDGED_DEG
+    assert again[0] < sample[0] - 1.5  # from the west, the real opening
+    # a staging point wedged at another sample, or none at all, changes nothing
+    assert approach.staging_point(free, sample, (123.0, 84.0), wedged_stages=[]) == first
+    blocked = np.zeros_like(free)
+    blocked[88:90, 121:123] = True  # where it wedged, on its run in from that staging point
+    assert approach.plan_approach(free, blocked, sample, (123.0, 84.0), wedged_stages=[first[:2]]) == again
+
+
+def test_a_stuck_on_the_way_to_a_staging_point_is_remembered_for_that_rock_only():
+    r = _rover_with_abandoned_arm()
+    nav = r.nav
+    nav.rock_target = nav.stage_for = (115.0, 85.0)
+    nav.stage = (112.5, 85.0, 0.0)
+    nav.mode = "sample"
+    s = decision._read_inputs(r)
+    decision._begin_recovery(nav, s, "stuck", 3.0)
+    assert nav.stages_wedged == [(115.0, 85.0, 112.5, 85.0)]
+    nav.stage, nav.stage_for, nav.mode = (118.0, 85.0, 180.0), (130.0, 85.0), "forward"
+    decision._begin_recovery(nav, s, "stuck", 3.0)  # exploring, not approaching: nothing to remember
+    assert nav.stages_wedged == [(115.0, 85.0, 112.5, 85.0)]
+
+
 def test_a_stuck_during_a_rock_approach_makes_it_decided_again():
     r = _rover_with_abandoned_arm()
     r.nav.rock_target = r.nav.stage_for = (115.0, 85.0)
