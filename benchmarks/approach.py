@@ -17,7 +17,7 @@ this before and after it (the spots are the issue's named places; no seed of the
 involved). Written: approach.json and approach.png (start points coloured by outcome) in --out.
 """
 import argparse
-import json
+import functools
 import logging
 import math
 import statistics
@@ -90,10 +90,9 @@ def run_start(args):
     from sim.physics import RoverPhysics
     from sim.timing import Timing, TwinLoop
     from sim.twin import RoverTwin
-    from sim.world import load_world, with_shadows
 
     r, bearing, x, y, yaw, facing = start
-    world = with_shadows(load_world("real"), shadows == "on")
+    world = _real_world(shadows)
     twin = RoverTwin(world, seed=0)
     loop = TwinLoop(twin, Timing())
     loop.reset(0)
@@ -122,6 +121,14 @@ def run_start(args):
                 shadows=shadows, collected=collected_at is not None,
                 time_s=None if collected_at is None else round(collected_at, 1), stuck_s=round(meter.total_s, 1),
                 end=(round(float(st.x), 1), round(float(st.y), 1)))
+
+
+@functools.lru_cache(maxsize=2)
+def _real_world(shadows):
+    """The real world with shadows "on" or "off", loaded once per worker process (like sim.evaluate's)."""
+    from sim.world import load_world, with_shadows
+
+    return with_shadows(load_world("real"), shadows == "on")
 
 
 def _show_sample(client, loop, world, spot_xy, view):

@@ -17,6 +17,8 @@ from typing import Optional, Tuple
 import cv2
 import numpy as np
 
+from navigation.predict import wrap_deg
+
 STANDOFF_M = 2.5  # staging point this far from the sample, m
 DIRECTIONS = 24  # candidate approach directions around the sample
 FINAL_RUN_M = 3.0  # the straight run to the sample that must be clear for a direct approach, m
@@ -100,6 +102,7 @@ def staging_point(free: np.ndarray, sample_xy, rover_xy=None,
         rx, ry = float(rover_xy[0]) - sx, float(rover_xy[1]) - sy
         if math.hypot(rx, ry) > 1e-6:
             side = math.atan2(ry, rx)
+    wedged_bearings = [math.degrees(math.atan2(wy - sy, wx - sx)) for wx, wy in wedged_stages]  # from the sample
     best, best_score = None, -math.inf
     for k in range(DIRECTIONS):
         a = 2.0 * math.pi * k / DIRECTIONS
@@ -109,8 +112,7 @@ def staging_point(free: np.ndarray, sample_xy, rover_xy=None,
         share = corridor_share(free, inner, (sx + ux * (standoff_m + 0.5), sy + uy * (standoff_m + 0.5)))
         if share < STAGE_MIN_SHARE or not _free_at(free, np.array([stage[0]]), np.array([stage[1]]))[0]:
             continue
-        if any(abs((math.degrees(a - math.atan2(wy - sy, wx - sx)) + 180.0) % 360.0 - 180.0) <= STAGE_WEDGED_DEG
-               for wx, wy in wedged_stages):
+        if any(abs(wrap_deg(math.degrees(a) - b)) <= STAGE_WEDGED_DEG for b in wedged_bearings):
             continue
         room = 0.0  # free run behind the staging point: room to arrive and turn
         for extra in (1.0, 2.0, 3.0):
