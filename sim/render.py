@@ -95,7 +95,7 @@ DIST_DARKEN = 0.17  # fraction of brightness lost far away (real sand 242 -> 202
 DIST_SCALE_M = 8.0  # e-folding distance of that darkening, m
 
 # --- sample rocks ---
-SAMPLE_RGB = (1.0, 217 / 255, 0.12)  # gold, 0..1 (Unity (1, 0.85, 0); real frames show blue ~34)
+SAMPLE_RGB = (1.0, 0.82, 0.03)  # gold, 0..1 (Unity (1, 0.85, 0)); fitted to the cores of close real blobs through the JPEG (megalphian: blue median 4, G/R 0.825; royalejandro, held out: 3, 0.827)
 SAMPLE_WIDTH_PER_SCALE_M = 0.37  # sample width at prefab scale 1, m
 SAMPLE_HEIGHT_PER_SCALE_M = 0.32  # sample height at prefab scale 1, m
 SAMPLE_SINK_M = 0.02  # samples are sunk this much into the floor, m
