@@ -114,6 +114,18 @@ def test_sample_rock_size_and_colour(flat_renderer):
     assert abs(xs.mean() - 160) < 4
 
 
+def test_sample_gold_matches_the_cores_of_close_real_blobs(flat_renderer):
+    """sim.render.SAMPLE_RGB: eroded cores of close real blobs (megalphian, through the simulator's JPEG)
+    have blue median 4 and green / red 0.825; the old gold (blue 0.12) drew blue 18-28 before any JPEG."""
+    perception = pytest.importorskip("perception", reason="perception.py (client) not present yet")
+    img = flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0), samples=[(102.4, 100.0, 0.45, 20.0)])
+    core = cv2.erode(perception.rock_mask(img).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    px = img[core].astype(float)
+    assert len(px) >= 20
+    assert np.median(px[:, 2]) <= 10
+    assert 0.80 <= np.median(px[:, 1] / px[:, 0]) <= 0.84
+
+
 def test_sample_hidden_behind_wall(canyon_renderer):
     """Depth test: a sample far behind the viewer's wall does not show."""
     w = canyon_renderer.world
