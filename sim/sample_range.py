@@ -151,14 +151,14 @@ def main(argv=None) -> int:
     from replay.log_format import LogFormatError, read_log
     from sim.world import load_world
 
+    if a.stride < 1:
+        log.error("--stride must be at least 1")
+        return 2
     try:
         data = read_log(_log_path(a.log))
         world = load_world("real")
     except (LogFormatError, OSError, ValueError) as exc:
         log.error("%s", exc)
-        return 2
-    if a.stride < 1:
-        log.error("--stride must be at least 1")
         return 2
     rows, active = measure(data.frames, world, a.stride)
     spots = np.asarray(world.sample_spots, float)

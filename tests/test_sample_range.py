@@ -15,8 +15,9 @@ def test_table_bands_medians_and_shares():
     assert bands[(4.0, 5.0)]["twin_seen_share"] == 0.0
 
 
-def test_cli_rejects_a_folder_that_is_not_a_log(tmp_path):
+def test_cli_rejects_a_folder_that_is_not_a_log_and_a_bad_stride(tmp_path):
     assert sample_range.main([str(tmp_path)]) == 2
+    assert sample_range.main([str(tmp_path), "--stride", "0"]) == 2
 
 
 def test_twin_finds_samples_about_as_far_as_the_real_drive(real_logs_dir, world_dir):
