@@ -1,5 +1,6 @@
 """Renderer: shape and layout of frames, sample rocks visible to the client, bad poses."""
 import importlib
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -214,6 +215,22 @@ def test_logged_pose_on_a_rock_raises_the_camera_by_the_wheels_support():
     assert origin_rock[2] - origin_flat[2] == pytest.approx(lift)
     # an explicit root height (the twin's physics) is used as given
     assert on_rock.camera(pose + (0.3,))[0][2] == pytest.approx(flat.camera(pose + (0.3,))[0][2])
+
+
+def test_shipped_calibration_images_show_floor_and_todays_gold():
+    """calibration_images/ (the project's own, for users without ../shared): floor in front, no gold in the grid
+    view, and in the rock view a blob the client finds, in the twin's current gold (blue median under 10 in the
+    blob's core; the images rendered with the old gold had 17)."""
+    perception = pytest.importorskip("perception", reason="perception.py (client) not present yet")
+    folder = Path(__file__).resolve().parent.parent / "calibration_images"
+    grid, rock = (cv2.cvtColor(cv2.imread(str(folder / name)), cv2.COLOR_BGR2RGB) for name in ("grid1.jpg", "rock1.jpg"))
+    assert grid.shape == rock.shape == (IMAGE_H, IMAGE_W, 3)
+    assert perception.navigable_mask(grid)[140:].mean() > 0.8
+    assert perception.rock_mask(grid).sum() < perception.ROCK_MIN_PIXELS
+    blob = perception.rock_mask(rock).astype(np.uint8)
+    assert blob.sum() > 50
+    core = cv2.erode(blob, np.ones((3, 3), np.uint8)) > 0
+    assert np.median(rock[core][:, 2]) < 10
 
 
 def test_calibration_grid_matches_standard_points(flat_renderer):
