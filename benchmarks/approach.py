@@ -17,7 +17,6 @@ this before and after it (the spots are the issue's named places; no seed of the
 involved). Written: approach.json and approach.png (start points coloured by outcome) in --out.
 """
 import argparse
-import functools
 import logging
 import math
 import statistics
@@ -123,12 +122,11 @@ def run_start(args):
                 end=(round(float(st.x), 1), round(float(st.y), 1)))
 
 
-@functools.lru_cache(maxsize=2)
 def _real_world(shadows):
-    """The real world with shadows "on" or "off", loaded once per worker process (like sim.evaluate's)."""
-    from sim.world import load_world, with_shadows
+    """The real world with shadows "on" or "off", loaded once per worker process (sim.backend's cache)."""
+    from sim.backend import cached_world
 
-    return with_shadows(load_world("real"), shadows == "on")
+    return cached_world("real", shadows == "on")
 
 
 def _show_sample(client, loop, world, spot_xy, view):

@@ -75,7 +75,8 @@ def code_fingerprint() -> str:
     return _FINGERPRINT
 
 
-def _world(spec: str, shadows: bool):
+def cached_world(spec: str, shadows: bool):
+    """The world `spec` with cast shadows on or off, loaded once per process (workers run many tasks on it)."""
     from sim.world import load_world, with_shadows
 
     key = (spec, bool(shadows))
@@ -136,7 +137,7 @@ def run_task(task: MissionTask) -> dict:
         import cv2
 
         cv2.setNumThreads(1)  # one mission per core
-        world = _world(task.world, task.shadows)
+        world = cached_world(task.world, task.shadows)
         tmp = tempfile.mkdtemp(prefix=f"mission-seed{task.seed}-")
         try:
             with _MISSION_LOCK, constants_set(task.constants):
