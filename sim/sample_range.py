@@ -20,18 +20,18 @@ LOG is a folder under ../shared/real-logs (default megalphian), test_dataset, or
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 import sys
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 import perception
 import shared_data
-from sim.render import Renderer, encode_jpeg
+from replay.runner import decode_frame, signed_angle
+from sim.realism import jpeg_roundtrip
+from sim.render import Renderer
 
 log = logging.getLogger(__name__)
 
@@ -46,17 +46,8 @@ WINDOW_ROWS_PX = 8  # the real frame's window reaches this far above and below t
 WINDOW_COLS_PX = 12  # ...and this far to either side, px
 
 
-def _signed(deg):
-    return deg - 360.0 if deg > 180.0 else deg
-
-
 def _level(frame):
-    return abs(_signed(frame.pitch)) <= LEVEL_DEG and abs(_signed(frame.roll)) <= LEVEL_DEG
-
-
-def _read_rgb(path):
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    return None if bgr is None else cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    return abs(signed_angle(frame.pitch)) <= LEVEL_DEG and abs(signed_angle(frame.roll)) <= LEVEL_DEG
 
 
 def active_spots(frames, spots):
@@ -65,14 +56,14 @@ def active_spots(frames, spots):
     for frame in frames[::ACTIVE_STRIDE]:
         if not _level(frame):
             continue
-        rgb = _read_rgb(frame.image_path)
+        rgb = decode_frame(frame.image_path)
         if rgb is None:
             continue
         mask = perception.rock_mask(rgb)
         if mask.sum() < perception.ROCK_MIN_PIXELS:
             continue
-        points, _, _ = perception._rock_detections(mask.astype(np.uint8) * 255, _signed(frame.pitch),
-                                                   _signed(frame.roll))
+        points, _, _ = perception._rock_detections(mask.astype(np.uint8) * 255, signed_angle(frame.pitch),
+                                                   signed_angle(frame.roll))
         for fx, fy in points:
             wx, wy = perception.rover_to_world(np.array([fx]), np.array([fy]), frame.x, frame.y, frame.yaw)
             d = np.hypot(spots[:, 0] - wx[0], spots[:, 1] - wy[0])
@@ -80,11 +71,6 @@ def active_spots(frames, spots):
             if d[k] < ACTIVE_RADIUS_M:
                 hits[k] += 1
     return [k for k in range(len(spots)) if hits[k] >= ACTIVE_MIN_HITS]
-
-
-def _decoded(rgb):
-    buf = np.frombuffer(encode_jpeg(rgb), np.uint8)
-    return cv2.cvtColor(cv2.imdecode(buf, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
 
 
 def measure(frames, world, stride=2):
@@ -107,13 +93,13 @@ def measure(frames, world, stride=2):
             raw_mask = perception.rock_mask(raw)
             if raw_mask.sum() < perception.ROCK_MIN_PIXELS:
                 continue
-            real = _read_rgb(frame.image_path) if real is None else real
+            real = decode_frame(frame.image_path) if real is None else real
             if real is None:
                 break
             vs, us = np.nonzero(raw_mask)
             window = perception.rock_mask(real)[max(vs.min() - WINDOW_ROWS_PX, 0):vs.max() + WINDOW_ROWS_PX + 1,
                                                 max(us.min() - WINDOW_COLS_PX, 0):us.max() + WINDOW_COLS_PX + 1]
-            rows.append((dist, int(window.sum()), int(perception.rock_mask(_decoded(raw)).sum()), int(raw_mask.sum())))
+            rows.append((dist, int(window.sum()), int(perception.rock_mask(jpeg_roundtrip(raw)).sum()), int(raw_mask.sum())))
     return np.array(rows, float).reshape(-1, 4), active
 
 
@@ -171,10 +157,10 @@ def main(argv=None) -> int:
                  perception.ROCK_MIN_PIXELS, 100 * band["real_seen_share"], band["twin_jpeg_px_median"],
                  100 * band["twin_seen_share"], band["twin_raw_px_median"])
     if a.json:
-        from safe_write import atomic_write
+        from sim.mission_parts import write_json_atomic
 
         try:
-            atomic_write(a.json, json.dumps({"log": str(data.log_path), "bands": result}, indent=1).encode())
+            write_json_atomic(a.json, {"log": str(data.log_path), "bands": result})
         except OSError as exc:
             log.error("cannot write %s: %s", a.json, exc)
             return 1

@@ -115,13 +115,18 @@ def test_sample_rock_size_and_colour(flat_renderer):
     assert abs(xs.mean() - 160) < 4
 
 
+def _gold_core(perception, rgb):
+    """Pixels of the client's gold blobs with their one-pixel edge (where the JPEG mixes in the sand) eroded away."""
+    blob = perception.rock_mask(rgb).astype(np.uint8)
+    return rgb[cv2.erode(blob, np.ones((3, 3), np.uint8)) > 0].astype(float)
+
+
 def test_sample_gold_matches_the_cores_of_close_real_blobs(flat_renderer):
     """sim.render.SAMPLE_RGB: eroded cores of close real blobs (megalphian, through the simulator's JPEG)
     have blue median 4 and green / red 0.825; the old gold (blue 0.12) drew blue 18-28 before any JPEG."""
     perception = pytest.importorskip("perception", reason="perception.py (client) not present yet")
     img = flat_renderer.render((100.0, 100.0, 0.0, 0.0, 0.0), samples=[(102.4, 100.0, 0.45, 20.0)])
-    core = cv2.erode(perception.rock_mask(img).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    px = img[core].astype(float)
+    px = _gold_core(perception, img)
     assert len(px) >= 20
     assert np.median(px[:, 2]) <= 10
     assert 0.80 <= np.median(px[:, 1] / px[:, 0]) <= 0.84
@@ -227,10 +232,8 @@ def test_shipped_calibration_images_show_floor_and_todays_gold():
     assert grid.shape == rock.shape == (IMAGE_H, IMAGE_W, 3)
     assert perception.navigable_mask(grid)[140:].mean() > 0.8
     assert perception.rock_mask(grid).sum() < perception.ROCK_MIN_PIXELS
-    blob = perception.rock_mask(rock).astype(np.uint8)
-    assert blob.sum() > 50
-    core = cv2.erode(blob, np.ones((3, 3), np.uint8)) > 0
-    assert np.median(rock[core][:, 2]) < 10
+    assert perception.rock_mask(rock).sum() > 50
+    assert np.median(_gold_core(perception, rock)[:, 2]) < 10
 
 
 def test_calibration_grid_matches_standard_points(flat_renderer):
