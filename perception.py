@@ -81,17 +81,25 @@ MAP_RANGE_FALLOFF = 0.5  # vote weight at MAP_RANGE_M relative to 1 at the rover
 NAV_VOTE_WEIGHT = 1.0  # weight of one navigable top-down cell vote
 OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
 NAV_MAJORITY = 0.2  # the drive map and pocket floor take a cell as navigable when the light-sand share of votes exceeds this, 0..1 (edge cells are mixed)
-SCORED_NAV_MAJORITY = 0.25  # the scored map (rover.worldmap) asks this light-sand share of a cell no range band has spoken for yet, 0..1
+SCORED_NAV_MAJORITY = 0.25  # the scored vote-share rule (the cell model's neighbour term) asks this light-sand share of a cell no range band has spoken for yet, 0..1
 # The scored map gives each range band an equal say (issue 27, round 5): a wall-foot cell gets thousands of
 # votes from 6-9 m, where it blurs into the wall, and a few hundred from 1.5-4.5 m, where it is plainly floor
 # or plainly not; summed, the far votes decide.  Averaged per band, each distance counts once.
 SCORED_BAND_EDGES_M = (1.5, 3.0, 4.5, 6.0)  # inner edges of the range bands, m (the last band runs to MAP_RANGE_M)
 SCORED_BAND_MIN_SHARE = 0.01  # a band's light share counts once it holds this share of the cell's votes (and MIN_CELL_VOTES), 0..1
-SCORED_BAND_SHARE = 0.35  # the scored map takes a cell as light sand when the mean of its bands' light shares exceeds this, 0..1
+SCORED_BAND_SHARE = 0.35  # ...and takes a cell as light sand when the mean of its bands' light shares exceeds this, 0..1
 SHADE_MAJORITY = 0.5  # ...or when light plus shadowed sand make up more than this share (the weaker evidence), 0..1
 MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
-FILL_MIN_NEIGHBOURS = 5  # a seen cell with at least this many of its 8 neighbours navigable shows navigable too, cells
-FILL_MIN_SAND_SHARE = 0.1  # ...when light plus shadowed sand make up at least this share of its votes, 0..1
+# The scored map itself (issue 27, round 8) weighs a cell's shares and its neighbours in one logistic model of
+# map_bw: a rim cell is part sand and part wall, and whether its centre is floor shows in its shares and in how
+# much floor surrounds it together, not in either alone.  Fitted by `python -m evaluation.fit_scored_cells` on
+# megalphian, test_dataset and twin missions (seeds 0-7 shadows off, 0-2 on); checked on the other drives.
+SCORED_CELL_W_LIGHT = 4.58  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
+SCORED_CELL_W_SAND = 4.04  # logit per unit of light plus shadowed sand share
+SCORED_CELL_W_SHADE = 7.52  # logit per unit of shadowed sand share (both shades)
+SCORED_CELL_W_NEIGHBOUR = 0.48  # logit per neighbour (of 8) the vote-share rules call navigable
+SCORED_CELL_BIAS = -5.59  # logit of a cell with no sand and no floor around it
+SCORED_CELL_MIN_P = 0.375  # a seen cell is navigable on the scored map when the model's probability exceeds this, 0..1
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 LOOK_RANGE_MAX_M = 4.0  # the closest-look map (how near the camera has seen each cell) records looks up to this, m
 LOOK_HALF_ANGLE_DEG = 40.0  # ...and only this far off the rover's heading, deg (a sample at the image's side edge is cut off or a few px; seed 0 passed the east-nook rock 50-80 deg off-axis and called it searched)
@@ -452,7 +460,7 @@ def drive_map(rover) -> np.ndarray:
 def pocket_floor(rover) -> np.ndarray:
     """bool (200, 200) [y, x]: floor the sample search may peek into for hidden samples.
 
-    The scored map without its darker shadowed sand and without the notch fill: the
+    The vote-share rules without the darker shadowed sand and without the cell model: the
     peeks were tuned on this stricter floor, and every extra pocket costs a detour
     (procedural:2 ran out of time at 5 of 6 samples when the peeks read the scored map).
     """
@@ -464,8 +472,8 @@ def render_worldmap(mem: PerceptionMemory, out: Optional[np.ndarray] = None, win
     """Rebuild the displayed worldmap from the votes (R obstacle, G rock, B navigable).
 
     ``window`` = (y0, y1, x0, x1) limits the R/B rebuild to the cells whose votes changed
-    (and, on the scored map, their neighbours, whose fill may follow them).
-    ``drive`` renders the drive map: shadowed sand stays obstacle, no fill, no rocks.
+    (and, on the scored map, their neighbours, whose cell model counts them).
+    ``drive`` renders the drive map: shadowed sand stays obstacle, no cell model, no rocks.
     """
     if out is None:
         out = np.zeros((WORLD_SIZE, WORLD_SIZE, 3), np.uint8)
@@ -493,7 +501,7 @@ def _worldmap_numpy(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, driv
         seen, is_nav = _majority_navigable(mem, y0, y1, x0, x1, drive=True)
     elif y1 > y0 and x1 > x0:
         y0, y1, x0, x1 = _grown(y0, y1, x0, x1)
-        seen, is_nav = _filled_navigable(mem, y0, y1, x0, x1)
+        seen, is_nav = _scored_navigable(mem, y0, y1, x0, x1)
     else:
         seen = is_nav = np.zeros((0, 0), bool)
     out[y0:y1, x0:x1, 2] = is_nav.view(np.uint8) * np.uint8(255)
@@ -502,7 +510,7 @@ def _worldmap_numpy(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, driv
 
 def _worldmap_fast(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, drive: bool):
     """render_worldmap's R/B rebuild of the window in one compiled pass (`_worldmap_kernel`): the same bytes
-    as the NumPy rules below (`_majority_navigable`, `band_light_share`, `_filled_navigable`; the reference,
+    as the NumPy rules below (`_majority_navigable`, `band_light_share`, `_scored_navigable`; the reference,
     tests/test_fast_paths_exact.py), at a fraction of their ~40 small-array calls per frame."""
     if drive:
         gy0, gy1, gx0, gx1 = y0, y1, x0, x1
@@ -515,28 +523,32 @@ def _worldmap_fast(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, drive
     if gy1 <= gy0 or gx1 <= gx0:
         return
     f32 = np.float32  # NumPy compares and scales a float32 array by a Python float in float32 (NEP 50)
+    model = np.array([SCORED_CELL_W_LIGHT, SCORED_CELL_W_SAND, SCORED_CELL_W_SHADE, SCORED_CELL_W_NEIGHBOUR,
+                      SCORED_CELL_BIAS, _scored_logit_min()], np.float32)
     _worldmap_kernel(mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.band_nav_votes,
                      mem.band_votes, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive, f32(MIN_CELL_VOTES),
                      f32(NAV_MAJORITY), f32(SCORED_NAV_MAJORITY), f32(SCORED_BAND_MIN_SHARE), f32(SCORED_BAND_SHARE),
-                     f32(SHADE_MAJORITY), int(FILL_MIN_NEIGHBOURS), f32(FILL_MIN_SAND_SHARE), out)
+                     f32(SHADE_MAJORITY), model, out)
 
 
 @njit(cache=True)
 def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, band_nav, band_all, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive,
-                     min_votes, nav_major, scored_major, band_min_share, band_share, shade_major, fill_neighbours,
-                     fill_sand, out):
-    """Cells of (py0:py1, px0:px1) classified by the vote-share rules (drive: light sand only; else the scored map's
-    band rule plus shadowed sand), then on (gy0:gy1, gx0:gx1) the scored map's neighbour fill (not drive), written
-    to out's R (seen, not navigable) and B (navigable) channels as 0/255.
+                     min_votes, nav_major, scored_major, band_min_share, band_share, shade_major, model, out):
+    """Cells of (py0:py1, px0:px1) classified by the vote-share rules (drive: light sand only; else the scored
+    band rule plus shadowed sand), then on (gy0:gy1, gx0:gx1) either those rules (drive) or the scored cell
+    model (``model`` = light, sand, shade and neighbour weights, bias, log-odds threshold) on the shares and
+    the rules' navigable neighbours, written to out's R (seen, not navigable) and B (navigable) channels as 0/255.
 
-    Bit-exactness with the NumPy rules: every sum, product and comparison in float32 as NumPy does them on float32
-    arrays with Python-float constants (the constants arrive as float32); the band sums in band order, as
-    ``sum(axis=0)`` adds them; the mean share as float64 sum / count rounded to float32, as NumPy's float32 / int64
-    division and ``astype(float32)`` give it. No fastmath (no reassociation, no fused multiply-add)."""
+    Bit-exactness with the NumPy rules: every sum, product, quotient and comparison in float32 as NumPy does
+    them on float32 arrays with Python-float constants (the constants arrive as float32); the band sums in band
+    order, as ``sum(axis=0)`` adds them; the mean share as float64 sum / count rounded to float32, as NumPy's
+    float32 / int64 division and ``astype(float32)`` give it; the model's terms in `scored_cell_logit`'s order.
+    No fastmath (no reassociation, no fused multiply-add)."""
     ph, pw = py1 - py0, px1 - px0
     bands = band_nav.shape[0]
     seen = np.zeros((ph, pw), np.uint8)
     is_nav = np.zeros((ph, pw), np.uint8)
+    light_share = np.zeros((ph, pw), np.float32)
     for i in range(ph):
         yy = py0 + i
         for j in range(pw):
@@ -563,8 +575,11 @@ def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, band_nav, band_all, py0, py1,
                 else:
                     share_sum = share_sum + np.float32(0.0)
             if count > 0:
-                light = np.float32(np.float64(share_sum) / np.float64(count)) > band_share
+                mean = np.float32(np.float64(share_sum) / np.float64(count))
+                light_share[i, j] = mean
+                light = mean > band_share
             else:
+                light_share[i, j] = nav / total
                 light = nav > scored_major * total
             sand = (nav + shade_v[yy, xx]) + dim_v[yy, xx]
             is_nav[i, j] = light or sand > shade_major * total
@@ -573,17 +588,19 @@ def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, band_nav, band_all, py0, py1,
         for xx in range(gx0, gx1):
             j = xx - px0
             nav_here = is_nav[i, j]
-            if not drive and seen[i, j] and not nav_here:
+            if not drive and seen[i, j]:
                 neighbours = 0
                 for di in range(-1, 2):
                     for dj in range(-1, 2):
                         ii, jj = i + di, j + dj
                         if (di != 0 or dj != 0) and 0 <= ii < ph and 0 <= jj < pw:
                             neighbours += is_nav[ii, jj]
-                if neighbours >= fill_neighbours:
-                    total = nav_v[yy, xx] + obs_v[yy, xx]
-                    sand = (nav_v[yy, xx] + shade_v[yy, xx]) + dim_v[yy, xx]
-                    nav_here = sand >= fill_sand * total
+                total = nav_v[yy, xx] + obs_v[yy, xx]
+                sand = ((nav_v[yy, xx] + shade_v[yy, xx]) + dim_v[yy, xx]) / total
+                shade = (shade_v[yy, xx] + dim_v[yy, xx]) / total
+                logit = (((model[0] * light_share[i, j] + model[1] * sand) + model[2] * shade)
+                         + model[3] * np.float32(neighbours)) + model[4]
+                nav_here = logit > model[5]
             out[yy, xx, 2] = 255 if nav_here else 0
             out[yy, xx, 0] = 255 if (seen[i, j] and not nav_here) else 0
 
@@ -627,20 +644,46 @@ def _sand_votes(mem: PerceptionMemory, y0, y1, x0, x1, dim_shade=True) -> np.nda
     return sand + mem.dim_shade_votes[y0:y1, x0:x1] if dim_shade else sand
 
 
-def _filled_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
-    """(seen, navigable) for the scored map: the majority rules plus the neighbour fill.
+def scored_cell_features(mem: PerceptionMemory, y0, y1, x0, x1):
+    """(seen, light, sand, shade, neighbours) float32 arrays for the window: the scored cell model's inputs.
 
-    map_bw's floor edges are smooth; a seen cell that some sand votes for and that floor
-    surrounds on most sides is a notch the votes left, not a wall.
+    light: the band-mean light-sand share (the plain share where no band speaks); sand: light plus shadowed
+    sand as a share of the votes; shade: shadowed sand alone; neighbours: how many of the 8 neighbours the
+    vote-share rules (`_majority_navigable`, scored) call navigable.  0 where the cell is not seen.
     """
     py0, py1, px0, px1 = _grown(y0, y1, x0, x1)
-    seen, is_nav = _majority_navigable(mem, py0, py1, px0, px1, scored=True)
-    neighbours = cv2.filter2D(is_nav.view(np.uint8), cv2.CV_16S, _EIGHT_NEIGHBOURS, borderType=cv2.BORDER_CONSTANT)
-    total = mem.nav_votes[py0:py1, px0:px1] + mem.obs_votes[py0:py1, px0:px1]
-    sand = _sand_votes(mem, py0, py1, px0, px1)
-    is_nav = is_nav | (seen & (neighbours >= FILL_MIN_NEIGHBOURS) & (sand >= FILL_MIN_SAND_SHARE * total))
-    inner = (slice(y0 - py0, y0 - py0 + (y1 - y0)), slice(x0 - px0, x0 - px0 + (x1 - x0)))
-    return seen[inner], is_nav[inner]
+    _, rule_nav = _majority_navigable(mem, py0, py1, px0, px1, scored=True)
+    counts = cv2.filter2D(rule_nav.view(np.uint8), cv2.CV_16S, _EIGHT_NEIGHBOURS, borderType=cv2.BORDER_CONSTANT)
+    neighbours = counts[y0 - py0:y0 - py0 + (y1 - y0), x0 - px0:x0 - px0 + (x1 - x0)].astype(np.float32)
+    nav = mem.nav_votes[y0:y1, x0:x1]
+    total = nav + mem.obs_votes[y0:y1, x0:x1]
+    seen = total >= MIN_CELL_VOTES
+    safe = np.where(seen, total, np.float32(1.0))
+    share, spoken = band_light_share(mem, y0, y1, x0, x1)
+    light = np.where(spoken, share, nav / safe)
+    sand = _sand_votes(mem, y0, y1, x0, x1) / safe
+    shade = (mem.shade_votes[y0:y1, x0:x1] + mem.dim_shade_votes[y0:y1, x0:x1]) / safe
+    zero = np.float32(0.0)
+    return (seen, np.where(seen, light, zero), np.where(seen, sand, zero), np.where(seen, shade, zero),
+            np.where(seen, neighbours, zero))
+
+
+def scored_cell_logit(light, sand, shade, neighbours):
+    """The scored cell model's log-odds that a cell is map_bw floor (float32, summed in a fixed order so the
+    compiled kernel gives the same bits)."""
+    return (((SCORED_CELL_W_LIGHT * light + SCORED_CELL_W_SAND * sand) + SCORED_CELL_W_SHADE * shade)
+            + SCORED_CELL_W_NEIGHBOUR * neighbours) + SCORED_CELL_BIAS
+
+
+def _scored_logit_min() -> float:
+    """SCORED_CELL_MIN_P as a log-odds threshold."""
+    return math.log(SCORED_CELL_MIN_P / (1.0 - SCORED_CELL_MIN_P))
+
+
+def _scored_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
+    """(seen, navigable) for the scored map: the cell model on the window's shares and neighbours."""
+    seen, light, sand, shade, neighbours = scored_cell_features(mem, y0, y1, x0, x1)
+    return seen, seen & (scored_cell_logit(light, sand, shade, neighbours) > _scored_logit_min())
 
 
 def _grown(y0, y1, x0, x1):
