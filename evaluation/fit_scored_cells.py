@@ -112,7 +112,7 @@ def fit_report(drives: dict, fitted: list, truth) -> str:
     y = np.concatenate([truth[drives[n][0]] for n in fitted]).astype(float)
     weights, bias = fit_logistic(X, y)
     checked = [n for n in drives if n not in fitted]
-    lines = [f"fitted on {len(fitted)} drives ({len(y)} cells): weights light {weights[0]:.3f}, sand {weights[1]:.3f}, "
+    lines = [f"fitted on {len(fitted)} drive{'' if len(fitted) == 1 else 's'} ({len(y)} cells): weights light {weights[0]:.3f}, sand {weights[1]:.3f}, "
              f"shade {weights[2]:.3f}, per neighbour {weights[3]:.3f}; bias {bias:.3f}",
              "", "| probability | shortfall, fitted drives | shortfall, checked drives |", "|---|---|---|"]
     scores = {n: [score_map(model_map(*drives[n], weights, bias, p), truth * 255) for p in THRESHOLDS] for n in drives}

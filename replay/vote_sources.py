@@ -42,10 +42,11 @@ PATH_EVERY = 10  # errors.png draws every Nth rover position
 # outwards; the check turns down a cell whose near views see mostly no sand, whatever the far ones say.
 NEAR_CONFIRM_RANGE_M = 5.0  # votes from ground nearer than this to the rover are near views, m
 NEAR_CONFIRM_MIN_VOTES = 2.0  # weighted near votes a cell needs before the check applies to it
-# The curve and the checks vary the scored map's deciding share: since round 5 that is the band-mean share
-# (SCORED_BAND_SHARE, 0.35); varying the plain share (which only decides cells no band speaks for) drew a flat line.
-NEAR_CHECKS = ((0.25, 0.5), (0.3, 0.4), (0.3, 0.5), (0.35, 0.5))  # (scored band share, near sand share) reported
-CURVE_SHARES = tuple(np.round(np.arange(0.15, 0.551, 0.025), 3))  # scored band shares of the reference curve
+# The curve and the checks vary what decides the scored map: since round 8 the cell model's probability
+# threshold (SCORED_CELL_MIN_P, 0.375); rounds 4-7 varied the band-mean share (SCORED_BAND_SHARE), which now only
+# decides which neighbours count as floor.
+NEAR_CHECKS = ((0.3, 0.5), (0.375, 0.4), (0.375, 0.5), (0.45, 0.5))  # (cell model probability, near sand share) reported
+CURVE_SHARES = tuple(np.round(np.arange(0.2, 0.651, 0.025), 3))  # cell model probabilities of the reference curve
 # Wrong cells by the rule that decided them and by how much cast shadow their votes saw (issue 27, round 6)
 SHADE_SEEN_SHARES = (0.05, 0.2)  # a wrong cell counts as in shadow when shadowed-sand votes make more than this share
 
@@ -138,16 +139,17 @@ def _memory(votes: VoteLog, keep: Optional[np.ndarray] = None):
     return mem, sums[4], sums[5]
 
 
-def _render(mem, share: Optional[float] = None) -> np.ndarray:
-    """perception.render_worldmap, with the scored band share (SCORED_BAND_SHARE) set to ``share`` for this call only."""
-    if share is None:
+def _render(mem, min_p: Optional[float] = None) -> np.ndarray:
+    """perception.render_worldmap, with the cell model's threshold (SCORED_CELL_MIN_P) set to ``min_p`` for this
+    call only."""
+    if min_p is None:
         return perception.render_worldmap(mem)
-    saved = perception.SCORED_BAND_SHARE
-    perception.SCORED_BAND_SHARE = share
+    saved = perception.SCORED_CELL_MIN_P
+    perception.SCORED_CELL_MIN_P = min_p
     try:
         return perception.render_worldmap(mem)
     finally:
-        perception.SCORED_BAND_SHARE = saved
+        perception.SCORED_CELL_MIN_P = saved
 
 
 def near_veto(worldmap: np.ndarray, near: np.ndarray, near_sand: np.ndarray, min_sand_share: float) -> np.ndarray:
@@ -166,8 +168,9 @@ def rebuild(votes: VoteLog, keep: Optional[np.ndarray] = None) -> np.ndarray:
 
 
 def near_confirmation(votes: VoteLog, truth: np.ndarray) -> Dict:
-    """The share curve, and each NEAR_CHECKS pair's mapped / fidelity and its fidelity gain over the curve at
-    equal mapped (the curve interpolated at the check's mapped figure)."""
+    """The threshold curve (``share_curve``: the cell model's probability threshold, mapped, fidelity), and each
+    NEAR_CHECKS pair's mapped / fidelity and its fidelity gain over the curve at equal mapped (the curve
+    interpolated at the check's mapped figure)."""
     from evaluation.metrics import score_map
 
     mem, near, near_sand = _memory(votes)
@@ -189,8 +192,9 @@ def near_confirmation(votes: VoteLog, truth: np.ndarray) -> Dict:
 def wrong_cells_by_rule(mem, truth: np.ndarray) -> Dict:
     """Why each wrong cell of the scored map is wrong, by perception's own rules.
 
-    False navigable cells by the rule that marks them (``light``: the light-sand share, ``shade``: only the
-    light-plus-shadowed-sand majority, ``fill``: only the notch fill); missed floor cells by whether any
+    False navigable cells by the vote-share rule that calls them floor too (``light``: the light-sand share,
+    ``shade``: only the light-plus-shadowed-sand majority, ``model``: neither, only the cell model, from sand
+    short of those rules and floor around it); missed floor cells by whether any
     vote saw them.  For both, how many have more than each SHADE_SEEN_SHARES share of shadowed-sand votes:
     wrong cells in cast shadow are a shadow problem, the others a lighting/edge one.
     """
@@ -211,7 +215,7 @@ def wrong_cells_by_rule(mem, truth: np.ndarray) -> Dict:
     false, missed = marked & ~floor, floor & ~marked
     return {"false": {"cells": int(false.sum()), "light": int(np.count_nonzero(false & light)),
                       "shade": int(np.count_nonzero(false & majority & ~light)),
-                      "fill": int(np.count_nonzero(false & ~majority)), **in_shadow(false)},
+                      "model": int(np.count_nonzero(false & ~majority)), **in_shadow(false)},
             "missed": {"cells": int(missed.sum()), "seen": int(np.count_nonzero(missed & seen)), **in_shadow(missed & seen)}}
 
 
@@ -326,7 +330,7 @@ def main(argv=None) -> int:
             print(f"{factor:14} {row['band']:16} {row['votes_pct']:8.1f} {str(row['light_share_false']):>12} "
                   f"{str(row['light_share_edge']):>11} {row['without_mapped_pct']:>21.2f} / {row['without_fidelity_pct']:.2f}")
     nc = report["near_confirmation"]
-    print("share curve (scored band share: mapped / fidelity %): "
+    print("threshold curve (cell model probability: mapped / fidelity %): "
           + ", ".join(f"{s:g}: {m:.2f} / {f:.2f}" for s, m, f in nc["share_curve"]))
     print(f"near confirmation (within {NEAR_CONFIRM_RANGE_M:g} m): share, near sand share -> mapped / fidelity %, "
           "fidelity gain over the share curve at equal mapped")
@@ -336,7 +340,7 @@ def main(argv=None) -> int:
     w = report["wrong_cells"]
     f, m = w["false"], w["missed"]
     lo, hi = (f"shadow_share_over_{t:g}" for t in SHADE_SEEN_SHARES)
-    print(f"false cells {f['cells']}: light share {f['light']}, shadowed-sand majority {f['shade']}, notch fill {f['fill']}; "
+    print(f"false cells {f['cells']}: light share {f['light']}, shadowed-sand majority {f['shade']}, cell model only {f['model']}; "
           f"in shadow (shadowed-sand votes > {SHADE_SEEN_SHARES[0]:g} / > {SHADE_SEEN_SHARES[1]:g}) {f[lo]} / {f[hi]}")
     print(f"missed floor cells {m['cells']}: seen {m['seen']}, of them in shadow {m[lo]} / {m[hi]}")
     print(f"errors.png and vote_sources.json in {out}")

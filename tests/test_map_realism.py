@@ -38,12 +38,16 @@ def real_world(world_dir):
 def test_twin_without_shadows_maps_like_the_real_frames(megalphian, real_world, monkeypatch):
     """The look goal is measured with the plain light-sand share it was set with: perception's per-range-band
     rule (issue 27 round 5, docs/perception.md) moves real and twin frames differently (at stride 6: gap 0.35
-    plain, 1.61 by bands; royalejandro at stride 2: 3.56 and 3.51), which is a perception matter, not the look's."""
+    plain, 1.61 by bands; royalejandro at stride 2: 3.56 and 3.51), and so does the cell model that decides the
+    scored map since round 8 (3.3 at stride 6): a perception matter, not the look's."""
     from sim.world import with_shadows
 
     import perception
 
     monkeypatch.setattr(perception, "SCORED_BAND_MIN_SHARE", 2.0)  # no band can speak: the plain share decides
+    monkeypatch.setattr(perception, "FAST_WORLDMAP", False)  # ... by the vote-share rules, not the cell model
+    monkeypatch.setattr(perception, "_scored_navigable", lambda mem, y0, y1, x0, x1: perception._majority_navigable(
+        mem, y0, y1, x0, x1, scored=True))
     r, real_map, twin_map = map_realism.compare(megalphian, with_shadows(real_world, False), STRIDE, moving=False)
     assert r.frames > 900
     assert r.real_mapped_pct > 90  # the recording itself maps well (replay target of issue 3)

@@ -33,7 +33,7 @@ def test_near_confirmation_only_turns_down_cells_near_views_saw_without_sand(tes
     assert (near_sand <= near + 1e-3).all() and near.sum() < votes.votes[:, :2].sum()
     report = near_confirmation(votes, ground_truth)
     assert len(report["share_curve"]) > 10 and all("gain_at_equal_mapped" in c for c in report["checks"])
-    # the curve varies the share that decides the scored map (the band share), so it is not one flat point
+    # the curve varies what decides the scored map (the cell model's threshold), so it is not one flat point
     assert len({(m, f) for _, m, f in report["share_curve"]}) > 3
 
 
@@ -53,8 +53,10 @@ def test_wrong_cells_are_split_by_the_rule_that_marked_them_and_by_shadow():
     mem.obs_votes[60, 50:60] = 20
     mem.shade_votes[40, 40] = mem.obs_votes[40, 40] = 10  # a cell of shadowed sand only: false by the majority
     w = wrong_cells_by_rule(mem, truth)
-    assert w["false"] == {"cells": 11, "light": 10, "shade": 1, "fill": 0, "shadow_share_over_0.05": 1,
+    assert w["false"] == {"cells": 11, "light": 10, "shade": 1, "model": 0, "shadow_share_over_0.05": 1,
                           "shadow_share_over_0.2": 1}
-    assert w["missed"] == {"cells": 10, "seen": 10, "shadow_share_over_0.05": 5, "shadow_share_over_0.2": 5}
+    # the dark half of the east column is missed; its shadowed half (0.44 sand, floor beside it) the cell model maps
+    assert w["missed"] == {"cells": 5, "seen": 5, "shadow_share_over_0.05": 0, "shadow_share_over_0.2": 0}
+    assert (P.render_worldmap(mem)[50:55, 59, 2] == 255).all()
     score = score_map(P.render_worldmap(mem), truth)
     assert w["false"]["cells"] == score.marked_cells - score.good_cells

@@ -1,0 +1,51 @@
+"""The scored map's cell model: its fit recovers a known model, and the tool runs on a real log."""
+import numpy as np
+import pytest
+
+import perception as P
+from evaluation import fit_scored_cells as F
+
+
+def test_logistic_fit_recovers_the_weights_that_drew_the_labels():
+    rng = np.random.default_rng(3)
+    X = rng.uniform(0, 1, (20000, 4)) * np.array([1, 1, 1, 8])
+    true_w, true_b = np.array([3.0, 2.0, -1.5, 0.4]), -2.5
+    y = (rng.random(len(X)) < 1 / (1 + np.exp(-(X @ true_w + true_b)))).astype(float)
+    w, b = F.fit_logistic(X, y)
+    assert np.allclose(w, true_w, atol=0.25) and b == pytest.approx(true_b, abs=0.3)
+
+
+def test_memory_files_round_trip_and_a_foreign_file_is_refused(tmp_path):
+    mem = P.PerceptionMemory()
+    mem.nav_votes[10, 20], mem.band_votes[2, 10, 20] = 5.0, 7.0
+    F.save_memory(mem, tmp_path / "a.npz")
+    back = F.load_memory(tmp_path / "a.npz")
+    assert back.nav_votes[10, 20] == 5.0 and back.band_votes[2, 10, 20] == 7.0
+    np.savez(tmp_path / "b.npz", nav_votes=np.zeros((200, 200)))
+    with pytest.raises(ValueError, match="obs_votes"):
+        F.load_memory(tmp_path / "b.npz")
+
+
+def test_the_model_map_is_the_scored_map(tmp_path):
+    """The tool scores a drive with the same verdicts as perception's own scored map."""
+    rng = np.random.default_rng(1)
+    mem = P.PerceptionMemory()
+    mem.nav_votes[...] = rng.uniform(0, 10, mem.nav_votes.shape) * (rng.random(mem.nav_votes.shape) < 0.7)
+    mem.obs_votes[...] = rng.uniform(0, 10, mem.obs_votes.shape)
+    mem.shade_votes[...] = mem.obs_votes * rng.random(mem.obs_votes.shape) * 0.5
+    seen, X = F.cell_table(mem)
+    weights, bias, min_p = F.shipped_weights()
+    blue = F.model_map(seen, X, weights, bias, min_p)[:, :, 2]
+    mismatch = np.count_nonzero(blue != P.render_worldmap(mem)[:, :, 2])
+    assert mismatch <= 0.001 * seen.sum()  # float64 here, float32 there: a cell on the threshold may differ
+
+
+def test_collect_and_fit_on_a_real_log(tmp_path, test_dataset_dir, ground_truth_path, capsys):
+    assert F.main(["collect", "--log", f"td={test_dataset_dir}", "--out", str(tmp_path)]) == 0
+    mem = F.load_memory(tmp_path / "td.npz")
+    assert (mem.nav_votes > 0).sum() > 300
+    assert F.main(["fit", str(tmp_path), "--fit", "td", "--truth", str(ground_truth_path)]) == 0
+    out = capsys.readouterr().out
+    assert "fitted on 1 drive (" in out and "| td | fitted |" in out
+    with pytest.raises(SystemExit, match="not in"):
+        F.main(["fit", str(tmp_path), "--fit", "nope", "--truth", str(ground_truth_path)])
