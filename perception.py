@@ -82,7 +82,7 @@ NAV_VOTE_WEIGHT = 1.0  # weight of one navigable top-down cell vote
 OBS_VOTE_WEIGHT = 1.0  # weight of one obstacle top-down cell vote
 NAV_MAJORITY = 0.2  # the drive map and pocket floor take a cell as navigable when the light-sand share of votes exceeds this, 0..1 (edge cells are mixed)
 SCORED_NAV_MAJORITY = 0.25  # the scored vote-share rule (the cell model's neighbour term) asks this light-sand share of a cell no range band has spoken for yet, 0..1
-# The scored map gives each range band an equal say (issue 27, round 5): a wall-foot cell gets thousands of
+# The scored light share gives each range band an equal say (issue 27, round 5): a wall-foot cell gets thousands of
 # votes from 6-9 m, where it blurs into the wall, and a few hundred from 1.5-4.5 m, where it is plainly floor
 # or plainly not; summed, the far votes decide.  Averaged per band, each distance counts once.
 SCORED_BAND_EDGES_M = (1.5, 3.0, 4.5, 6.0)  # inner edges of the range bands, m (the last band runs to MAP_RANGE_M)
