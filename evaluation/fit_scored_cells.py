@@ -6,8 +6,9 @@ share, its sand share, its shadowed-sand share and how many of its neighbours th
 floor.  This tool makes those weights reproducible and keeps fitted and checked drives apart:
 
 - ``collect`` replays real logs (``--log NAME=PATH``) and runs twin missions (``--twin SEED:SHADOWS:FPS:LATENCY``)
-  and saves each drive's final map votes as ``DIR/NAME.npz``.  The drive does not depend on the scored map
-  (the planner reads the drive map), so the votes are those of the shipped client, whatever the weights.
+  and saves each drive's final map votes as ``DIR/NAME.npz``.  The planner reads the drive map, not the scored
+  one (only the sample search's line of sight and its wall-foot looks read it), so other weights move a twin
+  mission's route a little, not the kind of votes it collects.
 - ``fit DIR --fit NAME ...`` fits the weights on the named drives only, prints them, prints the issue's
   shortfall (points of mapped and fidelity below the targets, summed) for each probability threshold on the
   fitted and on the other (checked) drives, and a table per drive: today's constants, the fitted model.
