@@ -39,7 +39,7 @@ def test_twin_without_shadows_maps_like_the_real_frames(megalphian, real_world, 
     """The look goal is measured with the plain light-sand share it was set with: perception's per-range-band
     rule (issue 27 round 5, docs/perception.md) moves real and twin frames differently (at stride 6: gap 0.35
     plain, 1.61 by bands; royalejandro at stride 2: 3.56 and 3.51), and so does the cell model that decides the
-    scored map since round 8 (3.3 at stride 6): a perception matter, not the look's."""
+    scored map since round 8 (3.1 at stride 6): a perception matter, not the look's."""
     from sim.world import with_shadows
 
     import perception
