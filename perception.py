@@ -65,6 +65,7 @@ SHADE_SAND_FIRST_ROW = 60  # rows above this are never floor within map range, p
 ROCK_RGB_MIN = (110, 90, 0)  # sample rocks are gold (1, 0.85, 0): bright R and G ...
 ROCK_RGB_MAX = (255, 255, 60)  # ... and little blue
 ROCK_MIN_PIXELS = 4  # smaller gold blobs are ignored as noise, px
+ROCK_EDGE_PX = 1  # a blob this close to the image's left or right edge is cut off: steered toward, never remembered, px
 ROCK_MAX_WIDTH_M = 0.25  # no sample looks wider than this (largest 0.19 m; real blobs 90 % <= 0.3 m incl. slopes), m
 
 # --- top-down grid (rover frame) used for both decision outputs and map votes ---
@@ -764,12 +765,17 @@ def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
     its base then projects several times too far; the blob's width caps the distance
     (no sample looks wider than ROCK_MAX_WIDTH_M).  Returns (points [(x, y)], angles,
     dists) where every blob pixel column is placed on the floor at the blob's base row.
+
+    A blob touching the image's left or right edge (ROCK_EDGE_PX) is a sample cut off by the
+    frame: its lowest visible pixel need not be its base, nor its width the sample's, so it gives
+    angles and dists but no point (a sample 0.6 m off the camera, 60 deg aside, showed as a sliver
+    at the edge that placed it 4 m away, and the rover chased that place for 460 s: seed 137).
     """
     rock8 = _to_u8(rock8)
     bx, by, bw, bh = cv2.boundingRect(rock8)
     crop = rock8[by:by + bh, bx:bx + bw]
     n, labels, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
-    us_all, vs_all, blob_u, blob_v, blob_w, blob_of = [], [], [], [], [], []
+    us_all, vs_all, blob_u, blob_v, blob_w, blob_of, cut = [], [], [], [], [], [], []
     for k in range(1, n):
         if stats[k, cv2.CC_STAT_AREA] < ROCK_MIN_PIXELS:
             continue
@@ -777,6 +783,7 @@ def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
         w, h = stats[k, cv2.CC_STAT_WIDTH], stats[k, cv2.CC_STAT_HEIGHT]
         vs, us = np.nonzero(labels[y0:y0 + h, x0:x0 + w] == k)
         bottom = vs.max()
+        cut.append(x0 + bx < ROCK_EDGE_PX or x0 + bx + w > rock8.shape[1] - ROCK_EDGE_PX)
         blob_of.append(np.full(us.shape, len(blob_u)))
         blob_u.append(us[vs == bottom].mean() + x0 + bx)
         blob_v.append(bottom + y0 + by)
@@ -790,7 +797,7 @@ def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
     xr, yr, ok = pixel_to_rover(np.array(blob_u), np.array(blob_v), _tilt=tilt, _cam=cam)
     shrink = _width_shrink(xr, yr, np.array(blob_w, np.float64))
     xr, yr = _shrink_toward_camera(xr, yr, shrink)
-    points = [(float(a), float(b)) for a, b, good in zip(xr, yr, ok) if good]
+    points = [(float(a), float(b)) for a, b, good, edge in zip(xr, yr, ok, cut) if good and not edge]
     px, py, pv = pixel_to_rover(np.concatenate(us_all), np.concatenate(vs_all), _tilt=tilt, _cam=cam)
     px, py = _shrink_toward_camera(px, py, shrink[np.concatenate(blob_of)])
     dists, angles = to_polar_coords(px[pv], py[pv])
