@@ -127,6 +127,17 @@ def test_a_rock_seen_from_a_steeper_tilt_is_not_remembered():
     assert r.rock_angles.size > 0 and r.rocks_world == []  # steered toward, never remembered
 
 
+@pytest.mark.parametrize("cols, remembered", [((314, 320), False), ((0, 6), False), ((300, 306), True)])
+def test_a_rock_cut_off_by_the_image_side_is_steered_toward_but_not_remembered(cols, remembered):
+    """A sample just outside the view shows as a sliver at the side edge whose lowest pixel is not its base
+    (held-out seed 137: placed 4 m off and chased for 460 s); fully in view, the same blob is remembered."""
+    r = _rover_seeing_gold_blob(3.0, 8, cols)
+    for _ in range(P.ROCK_MIN_HITS + 2):
+        P.perception_step(r)
+    assert r.rock_angles.size > 0
+    assert (len(r.rocks_world) == 1) == remembered
+
+
 def test_perception_step_fills_rover_fields():
     r = P.perception_step(_rover(_synthetic(), pos=(100.0, 90.0), yaw=45.0))
     assert r.map_updated
