@@ -132,21 +132,46 @@ def fit_report(drives: dict, fitted: list, truth) -> str:
     return "\n".join(lines)
 
 
+def log_spec(text: str):
+    """``NAME=PATH`` -> (name, path); the name becomes a file stem, so it may not hold a path separator."""
+    name, sep, path = text.partition("=")
+    if not sep or not name or not path or "/" in name or "\\" in name:
+        raise argparse.ArgumentTypeError(f"{text!r}: give NAME=PATH, e.g. megalphian=../shared/real-logs/megalphian")
+    return name, path
+
+
+def twin_spec(text: str):
+    """``SEED:on|off:FPS:LATENCY_MS`` -> (seed, shadows, fps, latency_ms), checked as the twin's timing is."""
+    from sim.timing import Timing
+
+    parts = text.split(":")
+    try:
+        if len(parts) != 4 or parts[1] not in ("on", "off"):
+            raise ValueError("four fields, shadows on or off")
+        seed, fps, latency = int(parts[0]), float(parts[2]), float(parts[3])
+        Timing(fps=fps, latency_ms=latency)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: give SEED:on|off:FPS:LATENCY_MS, e.g. 3:off:30:5 ({exc})")
+    return seed, parts[1] == "on", fps, latency
+
+
 def _collect(args) -> int:
-    from replay.log_format import read_log
+    from replay.log_format import LogFormatError, read_log
     from replay.runner import replay
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    for spec in args.log or []:
-        name, _, path = spec.partition("=")
-        _, rover, _ = replay(read_log(path), None, progress=False)
+    for name, path in args.log or []:
+        try:
+            _, rover, _ = replay(read_log(path), None, progress=False)
+        except (LogFormatError, OSError, ValueError) as exc:
+            log.error("%s: %s", name, exc)
+            return 2
         save_memory(perception.get_memory(rover), out / f"{name}.npz")
         log.info("%s: votes of %s saved", name, path)
-    for spec in args.twin or []:
-        seed, shadows, fps, latency = spec.split(":")
-        name = f"twin-{seed}-{shadows}-{fps}fps-{latency}ms"
-        _run_twin(int(seed), shadows == "on", float(fps), float(latency), out / f"{name}.npz")
+    for seed, shadows, fps, latency in args.twin or []:
+        name = f"twin-{seed}-{'on' if shadows else 'off'}-{fps:g}fps-{latency:g}ms"
+        _run_twin(seed, shadows, fps, latency, out / f"{name}.npz")
         log.info("%s: votes saved", name)
     return 0
 
@@ -169,11 +194,17 @@ def _fit(args) -> int:
     from evaluation.metrics import load_ground_truth
     import shared_data
 
-    truth = load_ground_truth(args.truth or shared_data.ground_truth_map_path()) > 0
+    try:
+        truth = load_ground_truth(args.truth or shared_data.ground_truth_map_path()) > 0
+    except ValueError as exc:
+        raise SystemExit(str(exc))
     files = sorted(Path(args.dir).glob("*.npz"))
     if not files:
         raise SystemExit(f"no .npz map-votes files in {args.dir} (run the collect command first)")
-    drives = {f.stem: cell_table(load_memory(f)) for f in files}
+    try:
+        drives = {f.stem: cell_table(load_memory(f)) for f in files}
+    except (OSError, ValueError) as exc:
+        raise SystemExit(f"cannot read the map votes in {args.dir}: {exc}")
     missing = [n for n in args.fit if n not in drives]
     if missing:
         raise SystemExit(f"not in {args.dir}: {', '.join(missing)}")
@@ -187,8 +218,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m evaluation.fit_scored_cells", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="cmd", required=True)
     c = sub.add_parser("collect", help="save the map votes of real logs and twin missions")
-    c.add_argument("--log", action="append", metavar="NAME=PATH", help="a real log to replay (robot_log.csv)")
-    c.add_argument("--twin", action="append", metavar="SEED:SHADOWS:FPS:LATENCY_MS",
+    c.add_argument("--log", action="append", type=log_spec, metavar="NAME=PATH",
+                   help="a real log to replay (robot_log.csv or its folder)")
+    c.add_argument("--twin", action="append", type=twin_spec, metavar="SEED:SHADOWS:FPS:LATENCY_MS",
                    help="a twin mission on the real world, e.g. 3:off:30:5")
     c.add_argument("--out", required=True, help="folder for the .npz files")
     f = sub.add_parser("fit", help="fit the cell model on some drives and check it on the others")

@@ -49,3 +49,23 @@ def test_collect_and_fit_on_a_real_log(tmp_path, test_dataset_dir, ground_truth_
     assert "fitted on 1 drive (" in out and "| td | fitted |" in out
     with pytest.raises(SystemExit, match="not in"):
         F.main(["fit", str(tmp_path), "--fit", "nope", "--truth", str(ground_truth_path)])
+
+
+@pytest.mark.parametrize("argv", [["collect", "--log", "no-name-given", "--out", "X"],
+                                  ["collect", "--log", "a/b=somewhere", "--out", "X"],
+                                  ["collect", "--twin", "3:maybe:30:5", "--out", "X"],
+                                  ["collect", "--twin", "3:off:0:5", "--out", "X"]])
+def test_bad_drive_specs_are_refused_before_anything_runs(argv, tmp_path):
+    argv = [str(tmp_path / "out") if a == "X" else a for a in argv]
+    with pytest.raises(SystemExit) as exit_:
+        F.main(argv)
+    assert exit_.value.code == 2 and not (tmp_path / "out").exists()
+
+
+def test_a_missing_log_truth_map_or_a_foreign_votes_file_is_a_clear_error(tmp_path, ground_truth_path):
+    assert F.main(["collect", "--log", f"gone={tmp_path / 'nothing'}", "--out", str(tmp_path)]) == 2
+    np.savez(tmp_path / "foreign.npz", something=np.zeros(3))
+    with pytest.raises(SystemExit, match="cannot read ground-truth map"):
+        F.main(["fit", str(tmp_path), "--fit", "foreign", "--truth", str(tmp_path / "t.png")])
+    with pytest.raises(SystemExit, match="cannot read the map votes"):
+        F.main(["fit", str(tmp_path), "--fit", "foreign", "--truth", str(ground_truth_path)])
