@@ -209,4 +209,6 @@ def test_realtime_wire_mission_against_the_real_client():
     assert r["mode"] == "wire" and r["timing"] == "unity" and r["fps"] == 30.0
     assert r["rejected_commands"] == 0 and r["frames"] >= 1  # how many depends on the machine's load
     assert r["frames"] <= r["render_fps"] * r["time_s"] + 2  # at most one telemetry per render frame
-    assert r["reply_delay_ms"] >= 1e3 / 30 - 1  # never in the frame it answers
+    # never in the frame it answers (that would be 0 ms): a later render frame, whose wall-clock spacing jitters
+    # under load (32.0 ms seen with six processes on two cores), so the bound is half a frame, not a frame less 1 ms
+    assert r["reply_delay_ms"] >= 0.5 * 1e3 / 30
