@@ -525,7 +525,7 @@ def _worldmap_fast(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, drive
         return
     f32 = np.float32  # NumPy compares and scales a float32 array by a Python float in float32 (NEP 50)
     model = np.array([SCORED_CELL_W_LIGHT, SCORED_CELL_W_SAND, SCORED_CELL_W_SHADE, SCORED_CELL_W_NEIGHBOUR,
-                      SCORED_CELL_BIAS, _scored_logit_min()], np.float32)
+                      SCORED_CELL_BIAS, scored_logit_min()], np.float32)
     _worldmap_kernel(mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.band_nav_votes,
                      mem.band_votes, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive, f32(MIN_CELL_VOTES),
                      f32(NAV_MAJORITY), f32(SCORED_NAV_MAJORITY), f32(SCORED_BAND_MIN_SHARE), f32(SCORED_BAND_SHARE),
@@ -676,15 +676,16 @@ def scored_cell_logit(light, sand, shade, neighbours):
             + SCORED_CELL_W_NEIGHBOUR * neighbours) + SCORED_CELL_BIAS
 
 
-def _scored_logit_min() -> float:
-    """SCORED_CELL_MIN_P as a log-odds threshold."""
-    return math.log(SCORED_CELL_MIN_P / (1.0 - SCORED_CELL_MIN_P))
+def scored_logit_min(min_p: Optional[float] = None) -> float:
+    """A probability threshold (default SCORED_CELL_MIN_P) as the log-odds the cell model's logit must exceed."""
+    p = SCORED_CELL_MIN_P if min_p is None else min_p
+    return math.log(p / (1.0 - p))
 
 
 def _scored_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
     """(seen, navigable) for the scored map: the cell model on the window's shares and neighbours."""
     seen, light, sand, shade, neighbours = scored_cell_features(mem, y0, y1, x0, x1)
-    return seen, seen & (scored_cell_logit(light, sand, shade, neighbours) > _scored_logit_min())
+    return seen, seen & (scored_cell_logit(light, sand, shade, neighbours) > scored_logit_min())
 
 
 def _grown(y0, y1, x0, x1):

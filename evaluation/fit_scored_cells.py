@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import io
 import logging
-import math
 import sys
 from pathlib import Path
 
@@ -86,7 +85,7 @@ def model_map(seen, X, weights, bias, min_p) -> np.ndarray:
     logit = X @ weights + bias
     wm = np.zeros((*seen.shape, 3), np.uint8)
     blue = np.zeros(seen.shape, bool)
-    blue[seen] = logit > math.log(min_p / (1 - min_p))
+    blue[seen] = logit > perception.scored_logit_min(min_p)
     wm[:, :, 2] = blue * 255
     return wm
 
