@@ -524,8 +524,7 @@ def _worldmap_fast(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, drive
     if gy1 <= gy0 or gx1 <= gx0:
         return
     f32 = np.float32  # NumPy compares and scales a float32 array by a Python float in float32 (NEP 50)
-    model = np.array([SCORED_CELL_W_LIGHT, SCORED_CELL_W_SAND, SCORED_CELL_W_SHADE, SCORED_CELL_W_NEIGHBOUR,
-                      SCORED_CELL_BIAS, scored_logit_min()], np.float32)
+    model = np.array([*scored_cell_weights(), scored_logit_min()], np.float32)
     _worldmap_kernel(mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.band_nav_votes,
                      mem.band_votes, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive, f32(MIN_CELL_VOTES),
                      f32(NAV_MAJORITY), f32(SCORED_NAV_MAJORITY), f32(SCORED_BAND_MIN_SHARE), f32(SCORED_BAND_SHARE),
@@ -674,6 +673,11 @@ def scored_cell_logit(light, sand, shade, neighbours):
     compiled kernel gives the same bits)."""
     return (((SCORED_CELL_W_LIGHT * light + SCORED_CELL_W_SAND * sand) + SCORED_CELL_W_SHADE * shade)
             + SCORED_CELL_W_NEIGHBOUR * neighbours) + SCORED_CELL_BIAS
+
+
+def scored_cell_weights() -> Tuple[float, float, float, float, float]:
+    """The cell model's weights in `scored_cell_logit`'s order: light, sand, shade, per neighbour, bias."""
+    return SCORED_CELL_W_LIGHT, SCORED_CELL_W_SAND, SCORED_CELL_W_SHADE, SCORED_CELL_W_NEIGHBOUR, SCORED_CELL_BIAS
 
 
 def scored_logit_min(min_p: Optional[float] = None) -> float:

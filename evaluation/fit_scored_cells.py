@@ -102,8 +102,9 @@ def shortfall(name: str, score) -> float:
 
 
 def shipped_weights():
-    return (np.array([perception.SCORED_CELL_W_LIGHT, perception.SCORED_CELL_W_SAND, perception.SCORED_CELL_W_SHADE,
-                      perception.SCORED_CELL_W_NEIGHBOUR]), perception.SCORED_CELL_BIAS, perception.SCORED_CELL_MIN_P)
+    """(weights (4,), bias, probability threshold) of the cell model perception ships."""
+    *weights, bias = perception.scored_cell_weights()
+    return np.array(weights), bias, perception.SCORED_CELL_MIN_P
 
 
 def fit_report(drives: dict, fitted: list, truth) -> str:
