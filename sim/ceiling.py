@@ -29,7 +29,7 @@ SUB_CELLS = 10  # samples per metre along each axis when measuring a cell's floo
 BRIGHT_SAND_WEIGHT = 0.735  # sand weight at which sunlit floor crosses the RGB > 160 threshold (twin colour table)
 CENTRE_SAND_STEPS = np.round(np.arange(0.55, 0.901, 0.01), 3)  # centre sand-weight thresholds tried
 BRIGHT_SHARE_STEPS = np.round(np.arange(0.0, 0.951, 0.05), 3)  # bright-floor share thresholds tried
-FIDELITY_FLOORS = (95.0, 96.0)  # report the best mapped at fidelity at least these, %
+FIDELITY_FLOORS = (95.0, 96.0, 97.0, 98.0)  # report the best mapped at fidelity at least these, %
 
 
 @dataclass
