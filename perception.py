@@ -58,6 +58,11 @@ SHADE_SAND_MIN_R = 110  # red at least this (sand light enough to map keeps R >=
 POCKET_SAND_MIN_R = 130  # shadowed sand at least this red also counts for the sample search's pocket peeks (darker sand is mapped, not peeked into), 0..255
 SHADE_SAND_MIN_G_PER_R = 0.90  # green / red at least this (slope feet and rock faces are redder)
 SHADE_SAND_MIN_B_PER_R = 0.83  # blue / red at least this (gold samples and brown rock have little blue)
+# sand just outside that hue: cast-shadowed sand sits on the 0.90 / 0.83 lines (test_dataset: medians 0.904 / 0.830),
+# so the rule takes about half of it; the looser band also takes walls on drives without cast shadow, so it gets
+# its own vote, weighed by the scored cell model (perception.md, ninth round)
+NEAR_SAND_MIN_G_PER_R = 0.88  # green / red at least this for near-hue sand (smooth, R >= SHADE_SAND_MIN_R, not shadowed sand)
+NEAR_SAND_MIN_B_PER_R = 0.80  # blue / red at least this for near-hue sand
 SHADE_SAND_MAX_SD = 10.0  # red standard deviation in the window at most this (rough rock is textured), 0..255
 SHADE_SAND_WINDOW_W_PX = 7  # width of the window for that texture test, px
 SHADE_SAND_WINDOW_H_PX = 1  # its height, px: one row, so it never straddles the floor/wall edge, which runs across
@@ -94,13 +99,14 @@ MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 # The scored map itself (issue 27, round 8) weighs a cell's shares and its neighbours in one logistic model of
 # map_bw: a rim cell is part sand and part wall, and whether its centre is floor shows in its shares and in how
 # much floor surrounds it together, not in either alone.  Fitted by `python -m evaluation.fit_scored_cells` on
-# megalphian, test_dataset and twin missions (seeds 0-7 shadows off, 0-2 on); checked on the other drives.
-SCORED_CELL_W_LIGHT = 4.58  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
-SCORED_CELL_W_SAND = 4.04  # logit per unit of light plus shadowed sand share
-SCORED_CELL_W_SHADE = 7.52  # logit per unit of shadowed sand share (both shades)
-SCORED_CELL_W_NEIGHBOUR = 0.48  # logit per neighbour (of 8) the vote-share rules call navigable
-SCORED_CELL_BIAS = -5.59  # logit of a cell with no sand and no floor around it
-SCORED_CELL_MIN_P = 0.375  # a seen cell is navigable on the scored map when the model's probability exceeds this, 0..1
+# megalphian, test_dataset and twin missions (seeds 0-3 shadows off, 0-2 on); checked on the other drives (round 9).
+SCORED_CELL_W_LIGHT = 4.41  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
+SCORED_CELL_W_SAND = 4.38  # logit per unit of light plus shadowed sand share
+SCORED_CELL_W_SHADE = 4.47  # logit per unit of shadowed sand share (both shades)
+SCORED_CELL_W_NEAR = 4.18  # logit per unit of near-hue sand share (NEAR_SAND_MIN_*)
+SCORED_CELL_W_NEIGHBOUR = 0.45  # logit per neighbour (of 8) the vote-share rules call navigable
+SCORED_CELL_BIAS = -5.97  # logit of a cell with no sand and no floor around it
+SCORED_CELL_MIN_P = 0.400  # a seen cell is navigable on the scored map when the model's probability exceeds this, 0..1
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 LOOK_RANGE_MAX_M = 4.0  # the closest-look map (how near the camera has seen each cell) records looks up to this, m
 LOOK_HALF_ANGLE_DEG = 40.0  # ...and only this far off the rover's heading, deg (a sample at the image's side edge is cut off or a few px; seed 0 passed the east-nook rock 50-80 deg off-axis and called it searched)
@@ -154,19 +160,22 @@ def shadowed_sand_mask(rgb: np.ndarray) -> np.ndarray:
     return cv2.bitwise_and(shadowed_sand_u8(rgb), cv2.bitwise_not(cv2.inRange(rgb, NAV_RGB_MIN, (255, 255, 255)))) > 0
 
 
-def shadowed_sand_u8(rgb: np.ndarray) -> np.ndarray:
+def shadowed_sand_u8(rgb: np.ndarray, g_per_r: Optional[float] = None, b_per_r: Optional[float] = None) -> np.ndarray:
     """uint8 0/255 (160, 320): sand-coloured, smooth pixels at or below SHADE_SAND_FIRST_ROW.
 
     Shadow dims every channel alike, so sand keeps its grey-beige ratios; brown
     slope feet, gold samples and dark rock do not.  Rough rock can share the
-    colour but not the smoothness, hence the local spread of red.
+    colour but not the smoothness, hence the local spread of red.  ``g_per_r`` / ``b_per_r``
+    replace the hue's minimum ratios (the near-hue band passes NEAR_SAND_MIN_*).
     """
+    g_per_r = SHADE_SAND_MIN_G_PER_R if g_per_r is None else g_per_r
+    b_per_r = SHADE_SAND_MIN_B_PER_R if b_per_r is None else b_per_r
     out = np.zeros(rgb.shape[:2], np.uint8)
     sub = rgb[SHADE_SAND_FIRST_ROW:]
     red = sub[:, :, 0].astype(np.float32)
     colour = ((red >= SHADE_SAND_MIN_R)
-              & (sub[:, :, 1] >= SHADE_SAND_MIN_G_PER_R * red)
-              & (sub[:, :, 2] >= SHADE_SAND_MIN_B_PER_R * red))
+              & (sub[:, :, 1] >= g_per_r * red)
+              & (sub[:, :, 2] >= b_per_r * red))
     k = (SHADE_SAND_WINDOW_W_PX, SHADE_SAND_WINDOW_H_PX)
     mean = cv2.boxFilter(red, -1, k, borderType=cv2.BORDER_REFLECT)
     mean_sq = cv2.boxFilter(red * red, -1, k, borderType=cv2.BORDER_REFLECT)
@@ -340,7 +349,7 @@ def _build_tables():
     _LEVEL_H = ground_homography(0.0, 0.0)
 
 
-_LABEL_UNKNOWN, _LABEL_OBSTACLE, _LABEL_NAV, _LABEL_SHADE, _LABEL_DIM_SHADE = 0, 1, 2, 3, 4
+_LABEL_UNKNOWN, _LABEL_OBSTACLE, _LABEL_NAV, _LABEL_SHADE, _LABEL_DIM_SHADE, _LABEL_NEAR_SAND = 0, 1, 2, 3, 4, 5
 SCORED_BANDS = len(SCORED_BAND_EDGES_M) + 1  # number of range bands
 _build_tables()
 
@@ -375,19 +384,22 @@ class PerceptionMemory:
         drive map as obstacle; :func:`pocket_floor` counts it too.
     dim_shade_votes: float32 (200, 200); the part of obs_votes that was darker sand in shadow
         (SHADE_SAND_MIN_R up to POCKET_SAND_MIN_R): navigable on the scored map only.
+    near_sand_votes: float32 (200, 200); the part of obs_votes that was near-hue sand (NEAR_SAND_MIN_*):
+        an obstacle everywhere but an input of the scored cell model.
     band_nav_votes, band_votes: float32 (SCORED_BANDS, 200, 200); nav_votes and all votes split by the
         range band (SCORED_BAND_EDGES_M) of the ground that cast them: the scored map's light share.
     look_range: float32 (200, 200); the closest range (m) from which the camera has seen
         each cell within LOOK_HALF_ANGLE_DEG of the heading (inf: never within LOOK_RANGE_MAX_M).  Small samples only show from close
         by, so the sample search reads it through :func:`looked_at_within`.
     last_grid: uint8 top-down label grid of the last frame (0 unknown, 1 obstacle, 2 navigable,
-        3 sand in shadow, 4 darker sand in shadow),
+        3 sand in shadow, 4 darker sand in shadow, 5 near-hue sand),
         rows = forward distance (row i at (i + 0.5) * GRID_RES_M), cols = lateral (left at high j).
     """
     nav_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     obs_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     shade_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     dim_shade_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
+    near_sand_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     look_range: np.ndarray = field(default_factory=lambda: np.full((WORLD_SIZE, WORLD_SIZE), np.inf, np.float32))
     band_nav_votes: np.ndarray = field(
         default_factory=lambda: np.zeros((SCORED_BANDS, WORLD_SIZE, WORLD_SIZE), np.float32))
@@ -525,18 +537,18 @@ def _worldmap_fast(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, drive
         return
     f32 = np.float32  # NumPy compares and scales a float32 array by a Python float in float32 (NEP 50)
     model = np.array([*scored_cell_weights(), scored_logit_min()], np.float32)
-    _worldmap_kernel(mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.band_nav_votes,
-                     mem.band_votes, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive, f32(MIN_CELL_VOTES),
+    _worldmap_kernel(mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.near_sand_votes,
+                     mem.band_nav_votes, mem.band_votes, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive, f32(MIN_CELL_VOTES),
                      f32(NAV_MAJORITY), f32(SCORED_NAV_MAJORITY), f32(SCORED_BAND_MIN_SHARE), f32(SCORED_BAND_SHARE),
                      f32(SHADE_MAJORITY), model, out)
 
 
 @njit(cache=True)
-def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, band_nav, band_all, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive,
+def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, near_v, band_nav, band_all, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive,
                      min_votes, nav_major, scored_major, band_min_share, band_share, shade_major, model, out):
     """Cells of (py0:py1, px0:px1) classified by the vote-share rules (drive: light sand only; else the scored
     band rule plus shadowed sand), then on (gy0:gy1, gx0:gx1) either those rules (drive) or the scored cell
-    model (``model`` = light, sand, shade and neighbour weights, bias, log-odds threshold) on the shares and
+    model (``model`` = light, sand, shade, near-hue and neighbour weights, bias, log-odds threshold) on the shares and
     the rules' navigable neighbours, written to out's R (seen, not navigable) and B (navigable) channels as 0/255.
 
     Bit-exactness with the NumPy rules: every sum, product, quotient and comparison in float32 as NumPy does
@@ -598,9 +610,10 @@ def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, band_nav, band_all, py0, py1,
                 total = nav_v[yy, xx] + obs_v[yy, xx]
                 sand = ((nav_v[yy, xx] + shade_v[yy, xx]) + dim_v[yy, xx]) / total
                 shade = (shade_v[yy, xx] + dim_v[yy, xx]) / total
-                logit = (((model[0] * light_share[i, j] + model[1] * sand) + model[2] * shade)
-                         + model[3] * np.float32(neighbours)) + model[4]
-                nav_here = logit > model[5]
+                near = near_v[yy, xx] / total
+                logit = ((((model[0] * light_share[i, j] + model[1] * sand) + model[2] * shade) + model[3] * near)
+                         + model[4] * np.float32(neighbours)) + model[5]
+                nav_here = logit > model[6]
             out[yy, xx, 2] = 255 if nav_here else 0
             out[yy, xx, 0] = 255 if (seen[i, j] and not nav_here) else 0
 
@@ -645,11 +658,12 @@ def _sand_votes(mem: PerceptionMemory, y0, y1, x0, x1, dim_shade=True) -> np.nda
 
 
 def scored_cell_features(mem: PerceptionMemory, y0, y1, x0, x1):
-    """(seen, light, sand, shade, neighbours) float32 arrays for the window: the scored cell model's inputs.
+    """(seen, light, sand, shade, near, neighbours) float32 arrays for the window: the scored cell model's inputs.
 
     light: the band-mean light-sand share (the plain share where no band speaks); sand: light plus shadowed
-    sand as a share of the votes; shade: shadowed sand alone; neighbours: how many of the 8 neighbours the
-    vote-share rules (`_majority_navigable`, scored) call navigable.  0 where the cell is not seen.
+    sand as a share of the votes; shade: shadowed sand alone; near: near-hue sand alone; neighbours: how many
+    of the 8 neighbours the vote-share rules (`_majority_navigable`, scored) call navigable.  0 where the cell
+    is not seen.
     """
     py0, py1, px0, px1 = _grown(y0, y1, x0, x1)
     _, rule_nav = _majority_navigable(mem, py0, py1, px0, px1, scored=True)
@@ -663,21 +677,23 @@ def scored_cell_features(mem: PerceptionMemory, y0, y1, x0, x1):
     light = np.where(spoken, share, nav / safe)
     sand = _sand_votes(mem, y0, y1, x0, x1) / safe
     shade = (mem.shade_votes[y0:y1, x0:x1] + mem.dim_shade_votes[y0:y1, x0:x1]) / safe
+    near = mem.near_sand_votes[y0:y1, x0:x1] / safe
     zero = np.float32(0.0)
     return (seen, np.where(seen, light, zero), np.where(seen, sand, zero), np.where(seen, shade, zero),
-            np.where(seen, neighbours, zero))
+            np.where(seen, near, zero), np.where(seen, neighbours, zero))
 
 
-def scored_cell_logit(light, sand, shade, neighbours):
+def scored_cell_logit(light, sand, shade, near, neighbours):
     """The scored cell model's log-odds that a cell is map_bw floor (float32, summed in a fixed order so the
     compiled kernel gives the same bits)."""
-    return (((SCORED_CELL_W_LIGHT * light + SCORED_CELL_W_SAND * sand) + SCORED_CELL_W_SHADE * shade)
-            + SCORED_CELL_W_NEIGHBOUR * neighbours) + SCORED_CELL_BIAS
+    return ((((SCORED_CELL_W_LIGHT * light + SCORED_CELL_W_SAND * sand) + SCORED_CELL_W_SHADE * shade)
+             + SCORED_CELL_W_NEAR * near) + SCORED_CELL_W_NEIGHBOUR * neighbours) + SCORED_CELL_BIAS
 
 
-def scored_cell_weights() -> Tuple[float, float, float, float, float]:
-    """The cell model's weights in `scored_cell_logit`'s order: light, sand, shade, per neighbour, bias."""
-    return SCORED_CELL_W_LIGHT, SCORED_CELL_W_SAND, SCORED_CELL_W_SHADE, SCORED_CELL_W_NEIGHBOUR, SCORED_CELL_BIAS
+def scored_cell_weights() -> Tuple[float, float, float, float, float, float]:
+    """The cell model's weights in `scored_cell_logit`'s order: light, sand, shade, near-hue, per neighbour, bias."""
+    return (SCORED_CELL_W_LIGHT, SCORED_CELL_W_SAND, SCORED_CELL_W_SHADE, SCORED_CELL_W_NEAR,
+            SCORED_CELL_W_NEIGHBOUR, SCORED_CELL_BIAS)
 
 
 def scored_logit_min(min_p: Optional[float] = None) -> float:
@@ -688,8 +704,8 @@ def scored_logit_min(min_p: Optional[float] = None) -> float:
 
 def _scored_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
     """(seen, navigable) for the scored map: the cell model on the window's shares and neighbours."""
-    seen, light, sand, shade, neighbours = scored_cell_features(mem, y0, y1, x0, x1)
-    return seen, seen & (scored_cell_logit(light, sand, shade, neighbours) > scored_logit_min())
+    seen, light, sand, shade, near, neighbours = scored_cell_features(mem, y0, y1, x0, x1)
+    return seen, seen & (scored_cell_logit(light, sand, shade, near, neighbours) > scored_logit_min())
 
 
 def _grown(y0, y1, x0, x1):
@@ -741,6 +757,8 @@ _SHADE_VALUE = 192  # camera-mask value of sand in shadow (neither 0, 255 nor th
 _GRID_LUT[_SHADE_VALUE] = _LABEL_SHADE
 _DIM_SHADE_VALUE = _SHADE_VALUE - 128  # camera-mask value of shadowed sand darker than POCKET_SAND_MIN_R
 _GRID_LUT[_DIM_SHADE_VALUE] = _LABEL_DIM_SHADE
+_NEAR_SAND_VALUE = 160  # camera-mask value of near-hue sand (none of the values above)
+_GRID_LUT[_NEAR_SAND_VALUE] = _LABEL_NEAR_SAND
 _WARP_BORDER = 128  # value the warp gives grid cells outside the camera image
 
 
@@ -864,13 +882,14 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
     found = _vote_kernel(grid.ravel(), _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST, _MAP_BAND,
                          float(x), float(y), math.cos(a), math.sin(a), float(NAV_VOTE_WEIGHT),
                          float(OBS_VOTE_WEIGHT), mem.nav_votes, mem.obs_votes, mem.shade_votes,
-                         mem.dim_shade_votes, mem.look_range, mem.band_nav_votes, mem.band_votes, window)
+                         mem.dim_shade_votes, mem.near_sand_votes, mem.look_range, mem.band_nav_votes, mem.band_votes,
+                         window)
     return (int(window[0]), int(window[1]), int(window[2]), int(window[3])) if found else None
 
 
 @njit(cache=True)
 def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, map_band, xpos, ypos, c, s,
-                 nav_weight, obs_weight, nav_votes, obs_votes, shade_votes, dim_votes, look_range, band_nav,
+                 nav_weight, obs_weight, nav_votes, obs_votes, shade_votes, dim_votes, near_votes, look_range, band_nav,
                  band_all, window):
     """The votes of the grid cells ``cells`` (flat indices into ``labels``) at pose (xpos, ypos, yaw
     with cos c, sin s); writes (y0, y1, x0, x1) into ``window`` and returns False when no seen
@@ -913,6 +932,7 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, ma
     obs_sum = np.zeros(size)
     shade_sum = np.zeros(size)
     dim_sum = np.zeros(size)
+    near_sum = np.zeros(size)
     bands = band_nav.shape[0]
     band_nav_sum = np.zeros(bands * size)
     band_all_sum = np.zeros(bands * size)
@@ -933,6 +953,8 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, ma
                 shade_sum[cell] += w * obs_weight
             elif label == _LABEL_DIM_SHADE:
                 dim_sum[cell] += w * obs_weight
+            elif label == _LABEL_NEAR_SAND:
+                near_sum[cell] += w * obs_weight
         if map_look[k] and map_dist[k] < look_range[iy[j], ix[j]]:
             look_range[iy[j], ix[j]] = map_dist[k]
     for r in range(y1 - y0):
@@ -943,6 +965,7 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, ma
             obs_votes[yy, xx] = np.float32(np.float64(obs_votes[yy, xx]) + obs_sum[cell])
             shade_votes[yy, xx] = np.float32(np.float64(shade_votes[yy, xx]) + shade_sum[cell])
             dim_votes[yy, xx] = np.float32(np.float64(dim_votes[yy, xx]) + dim_sum[cell])
+            near_votes[yy, xx] = np.float32(np.float64(near_votes[yy, xx]) + near_sum[cell])
             for b in range(bands):
                 band_nav[b, yy, xx] = np.float32(np.float64(band_nav[b, yy, xx]) + band_nav_sum[b * size + cell])
                 band_all[b, yy, xx] = np.float32(np.float64(band_all[b, yy, xx]) + band_all_sum[b * size + cell])
@@ -954,7 +977,7 @@ def _pixel_labels(img: np.ndarray):
     """(labels8, nav8, rock8, shade8) of a camera frame in one compiled pass.
 
     labels8: 255 light sand, _SHADE_VALUE sand in shadow, _DIM_SHADE_VALUE darker sand in shadow,
-    0 anything else (what label_grid warps); the others uint8 0/255 masks as navigable_mask,
+    _NEAR_SAND_VALUE near-hue sand, 0 anything else (what label_grid warps); the others uint8 0/255 masks as navigable_mask,
     rock_mask and shadowed_sand_mask give them.  Bit for bit what the OpenCV/NumPy chain of
     those functions gives (tests/test_fast_paths_exact.py), at a fraction of its dozen passes.
     """
@@ -965,8 +988,9 @@ def _pixel_labels(img: np.ndarray):
     _pixel_labels_kernel(img, np.array(NAV_RGB_MIN, np.int64), np.array(ROCK_RGB_MIN, np.int64),
                          np.array(ROCK_RGB_MAX, np.int64), int(SHADE_SAND_MIN_R), int(POCKET_SAND_MIN_R),
                          float(SHADE_SAND_MIN_G_PER_R), float(SHADE_SAND_MIN_B_PER_R),
+                         float(NEAR_SAND_MIN_G_PER_R), float(NEAR_SAND_MIN_B_PER_R),
                          float(SHADE_SAND_MAX_SD) ** 2, int(SHADE_SAND_WINDOW_W_PX), int(SHADE_SAND_FIRST_ROW),
-                         _SHADE_VALUE, _DIM_SHADE_VALUE, labels8, nav8, rock8, shade8)
+                         _SHADE_VALUE, _DIM_SHADE_VALUE, _NEAR_SAND_VALUE, labels8, nav8, rock8, shade8)
     return labels8, nav8, rock8, shade8
 
 
@@ -978,17 +1002,22 @@ def _pixel_labels_opencv(img: np.ndarray):
     dim8 = cv2.bitwise_and(shade8, cv2.inRange(img, (0, 0, 0), (POCKET_SAND_MIN_R - 1, 255, 255)))
     labels8 = cv2.bitwise_or(nav8, np.bitwise_and(shade8, np.uint8(_SHADE_VALUE)))
     labels8 = cv2.subtract(labels8, np.bitwise_and(dim8, np.uint8(_SHADE_VALUE - _DIM_SHADE_VALUE)))
+    near8 = cv2.bitwise_and(shadowed_sand_u8(img, NEAR_SAND_MIN_G_PER_R, NEAR_SAND_MIN_B_PER_R),
+                            cv2.bitwise_not(cv2.bitwise_or(nav8, shade8)))
+    labels8 = cv2.bitwise_or(labels8, np.bitwise_and(near8, np.uint8(_NEAR_SAND_VALUE)))
     return labels8, nav8, rock8, shade8
 
 
 @njit(cache=True)
-def _pixel_labels_kernel(img, nav_min, rock_min, rock_max, shade_min_r, pocket_min_r, g_per_r, b_per_r, max_var,
-                         win_w, first_row, shade_value, dim_value, labels8, nav8, rock8, shade8):
+def _pixel_labels_kernel(img, nav_min, rock_min, rock_max, shade_min_r, pocket_min_r, g_per_r, b_per_r, near_g_per_r,
+                         near_b_per_r, max_var, win_w, first_row, shade_value, dim_value, near_value, labels8, nav8,
+                         rock8, shade8):
     """See _pixel_labels.  The texture test is shadowed_sand_u8's: the red mean and mean square over a
     win_w x 1 window (reflected at the image edge) as OpenCV's boxFilter computes them for float32
     (exact integer sums, times 1/win_w in float64, rounded to float32), then their float32 variance."""
     h, w = img.shape[0], img.shape[1]
     g_ratio, b_ratio = np.float32(g_per_r), np.float32(b_per_r)
+    near_g, near_b = np.float32(near_g_per_r), np.float32(near_b_per_r)
     inv = 1.0 / win_w
     half = win_w // 2
     for v in range(h):
@@ -998,9 +1027,11 @@ def _pixel_labels_kernel(img, nav_min, rock_min, rock_max, shade_min_r, pocket_m
             rock = (rock_min[0] <= r <= rock_max[0] and rock_min[1] <= g <= rock_max[1]
                     and rock_min[2] <= b <= rock_max[2])
             shade = False
+            near = False
             if v >= first_row and not nav and r >= shade_min_r:
                 red = np.float32(r)
-                if g >= g_ratio * red and b >= b_ratio * red:
+                hue = g >= g_ratio * red and b >= b_ratio * red
+                if hue or (g >= near_g * red and b >= near_b * red):
                     s1 = 0
                     s2 = 0
                     for k in range(u - half, u - half + win_w):
@@ -1010,11 +1041,14 @@ def _pixel_labels_kernel(img, nav_min, rock_min, rock_max, shade_min_r, pocket_m
                         s2 += x * x
                     mean = np.float32(s1 * inv)
                     mean_sq = np.float32(s2 * inv)
-                    shade = mean_sq - mean * mean <= max_var
+                    smooth = mean_sq - mean * mean <= max_var
+                    shade = smooth and hue
+                    near = smooth and not hue
             nav8[v, u] = 255 if nav else 0
             rock8[v, u] = 255 if rock else 0
             shade8[v, u] = 255 if shade else 0
-            labels8[v, u] = 255 if nav else ((dim_value if r < pocket_min_r else shade_value) if shade else 0)
+            labels8[v, u] = 255 if nav else ((dim_value if r < pocket_min_r else shade_value) if shade
+                                             else (near_value if near else 0))
 
 
 def _polar_outputs(grid: np.ndarray):

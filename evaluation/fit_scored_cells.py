@@ -1,9 +1,9 @@
 """Fit the scored map's cell model: ``python -m evaluation.fit_scored_cells collect|fit``.
 
-The scored map (``rover.worldmap``) calls a seen cell floor when a logistic model of map_bw on four
-figures of the cell says so (perception.SCORED_CELL_*; issue 27, eighth perception round): its light-sand
-share, its sand share, its shadowed-sand share and how many of its neighbours the vote-share rules call
-floor.  This tool makes those weights reproducible and keeps fitted and checked drives apart:
+The scored map (``rover.worldmap``) calls a seen cell floor when a logistic model of map_bw on five
+figures of the cell says so (perception.SCORED_CELL_*; issue 27, eighth and ninth perception rounds): its
+light-sand share, its sand share, its shadowed-sand share, its near-hue sand share and how many of its
+neighbours the vote-share rules call floor.  This tool makes those weights reproducible and keeps fitted and checked drives apart:
 
 - ``collect`` replays real logs (``--log NAME=PATH``) and runs twin missions (``--twin SEED:SHADOWS:FPS:LATENCY``)
   and saves each drive's final map votes as ``DIR/NAME.npz``.  The planner reads the drive map, not the scored
@@ -28,8 +28,8 @@ from evaluation.metrics import score_map
 
 log = logging.getLogger(__name__)
 
-MEMORY_FIELDS = ("nav_votes", "obs_votes", "shade_votes", "dim_shade_votes", "look_range", "band_nav_votes",
-                 "band_votes")  # PerceptionMemory arrays a drive's file keeps
+MEMORY_FIELDS = ("nav_votes", "obs_votes", "shade_votes", "dim_shade_votes", "near_sand_votes", "look_range",
+                 "band_nav_votes", "band_votes")  # PerceptionMemory arrays a drive's file keeps
 RIDGE = 1e-3  # L2 penalty on the (standardised) weights, per cell
 NEWTON_STEPS = 30  # Newton iterations of the logistic fit (it converges in under ten)
 THRESHOLDS = tuple(np.round(np.arange(0.25, 0.651, 0.025), 3))  # model probabilities the shortfall is printed for
@@ -59,14 +59,14 @@ def load_memory(path) -> perception.PerceptionMemory:
 
 
 def cell_table(mem):
-    """(seen (200, 200) bool, X (n, 4) float32): the model's inputs for every seen cell, in the map's order."""
+    """(seen (200, 200) bool, X (n, 5) float32): the model's inputs for every seen cell, in the map's order."""
     n = perception.WORLD_SIZE
-    seen, light, sand, shade, neighbours = perception.scored_cell_features(mem, 0, n, 0, n)
-    return seen, np.stack([light[seen], sand[seen], shade[seen], neighbours[seen]], 1)
+    seen, light, sand, shade, near, neighbours = perception.scored_cell_features(mem, 0, n, 0, n)
+    return seen, np.stack([light[seen], sand[seen], shade[seen], near[seen], neighbours[seen]], 1)
 
 
 def fit_logistic(X: np.ndarray, y: np.ndarray):
-    """(weights (4,), bias) of the ridge-penalised logistic regression of y on X, by Newton's method."""
+    """(weights (k,), bias) of the ridge-penalised logistic regression of y on X, by Newton's method."""
     mu, sd = X.mean(0), X.std(0) + 1e-9
     A = np.hstack([(X - mu) / sd, np.ones((len(X), 1))])
     w = np.zeros(A.shape[1])
@@ -102,7 +102,7 @@ def shortfall(name: str, score) -> float:
 
 
 def shipped_weights():
-    """(weights (4,), bias, probability threshold) of the cell model perception ships."""
+    """(weights (5,), bias, probability threshold) of the cell model perception ships."""
     *weights, bias = perception.scored_cell_weights()
     return np.array(weights), bias, perception.SCORED_CELL_MIN_P
 
@@ -114,7 +114,7 @@ def fit_report(drives: dict, fitted: list, truth) -> str:
     weights, bias = fit_logistic(X, y)
     checked = [n for n in drives if n not in fitted]
     lines = [f"fitted on {len(fitted)} drive{'' if len(fitted) == 1 else 's'} ({len(y)} cells): weights light {weights[0]:.3f}, sand {weights[1]:.3f}, "
-             f"shade {weights[2]:.3f}, per neighbour {weights[3]:.3f}; bias {bias:.3f}",
+             f"shade {weights[2]:.3f}, near-hue {weights[3]:.3f}, per neighbour {weights[4]:.3f}; bias {bias:.3f}",
              "", "| probability | shortfall, fitted drives | shortfall, checked drives |", "|---|---|---|"]
     scores = {n: [score_map(model_map(*drives[n], weights, bias, p), truth * 255) for p in THRESHOLDS] for n in drives}
     for i, p in enumerate(THRESHOLDS):

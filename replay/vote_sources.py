@@ -56,8 +56,9 @@ class VoteLog:
     """Every map vote of a replay, summed per (frame, cell, range band).
 
     frame: int32 (N,) index into ``features``; cell: int32 (N,) = y * 200 + x; band: int8 (N,) range band;
-    votes: float32 (N, 6) light sand, everything else (as obs_votes), sand in shadow, darker sand in shadow,
-        and of all these the part from ground within NEAR_CONFIRM_RANGE_M: all, and light plus shadowed sand.
+    votes: float32 (N, 7) light sand, everything else (as obs_votes), sand in shadow, darker sand in shadow,
+        and of all these the part from ground within NEAR_CONFIRM_RANGE_M: all, and light plus shadowed sand;
+        last, near-hue sand (perception.NEAR_SAND_MIN_*).
     features: float64 (frames, 7) t s, x m, y m, yaw deg, pitch deg, roll deg, speed m/s.
     """
     frame: np.ndarray
@@ -108,7 +109,8 @@ def collect(log_path, ground_truth=None, progress: bool = False) -> VoteLog:
         uk, inv = np.unique(cell * nb + band, return_inverse=True)
         sand = (lab == perception._LABEL_NAV) | (lab == perception._LABEL_SHADE) | (lab == perception._LABEL_DIM_SHADE)
         cols = [lab == perception._LABEL_NAV, lab != perception._LABEL_NAV,
-                lab == perception._LABEL_SHADE, lab == perception._LABEL_DIM_SHADE, near, near & sand]
+                lab == perception._LABEL_SHADE, lab == perception._LABEL_DIM_SHADE, near, near & sand,
+                lab == perception._LABEL_NEAR_SAND]
         votes = np.stack([np.bincount(inv, w * c, len(uk)) for c in cols], 1).astype(np.float32)
         parts.append((np.full(len(uk), len(feats) - 1, np.int32), uk, votes))
 
@@ -127,8 +129,10 @@ def _memory(votes: VoteLog, keep: Optional[np.ndarray] = None):
     mem = perception.PerceptionMemory()
     n = perception.WORLD_SIZE
     w = np.ones(len(votes.cell)) if keep is None else keep.astype(np.float64)
-    sums = [np.bincount(votes.cell, votes.votes[:, col] * w, n * n).reshape(n, n).astype(np.float32) for col in range(6)]
-    for arr, col in ((mem.nav_votes, 0), (mem.obs_votes, 1), (mem.shade_votes, 2), (mem.dim_shade_votes, 3)):
+    sums = [np.bincount(votes.cell, votes.votes[:, col] * w, n * n).reshape(n, n).astype(np.float32)
+            for col in range(votes.votes.shape[1])]
+    for arr, col in ((mem.nav_votes, 0), (mem.obs_votes, 1), (mem.shade_votes, 2), (mem.dim_shade_votes, 3),
+                     (mem.near_sand_votes, 6)):
         arr += sums[col]
     for b in range(perception.SCORED_BANDS):  # the scored map's per-band light shares
         in_band = (votes.band == b) * w

@@ -28,7 +28,8 @@ def _reference_vote(mem, grid, x, y, yaw):
     kind = labels[known_idx]
     is_nav = kind == P._LABEL_NAV
     size = (y1 - y0) * w_cols
-    for label, votes in ((P._LABEL_SHADE, mem.shade_votes), (P._LABEL_DIM_SHADE, mem.dim_shade_votes)):
+    for label, votes in ((P._LABEL_SHADE, mem.shade_votes), (P._LABEL_DIM_SHADE, mem.dim_shade_votes),
+                         (P._LABEL_NEAR_SAND, mem.near_sand_votes)):
         is_shade = kind == label
         if is_shade.any():
             votes[y0:y1, x0:x1] += np.bincount(local[is_shade], w[is_shade] * P.OBS_VOTE_WEIGHT,
@@ -50,7 +51,7 @@ def _reference_vote(mem, grid, x, y, yaw):
 
 
 def _label_grid(img, pitch, roll):
-    """The label grid perception_step warps from a camera frame (light sand, shadowed and dim sand)."""
+    """The label grid perception_step warps from a camera frame (light sand, shadowed and dim sand, near-hue sand)."""
     r = RoverState()
     r.img, r.pos, r.yaw, r.pitch, r.roll = img, (100.0, 100.0), 0.0, pitch, roll
     P.perception_step(r)
@@ -58,8 +59,8 @@ def _label_grid(img, pitch, roll):
 
 
 def _maps(mem):
-    return [mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.look_range, mem.band_nav_votes,
-            mem.band_votes]
+    return [mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.near_sand_votes, mem.look_range,
+            mem.band_nav_votes, mem.band_votes]
 
 
 def test_compiled_vote_equals_the_numpy_reference_bit_for_bit(test_dataset_dir):
@@ -125,13 +126,14 @@ def test_compiled_pixel_labels_equal_the_opencv_chain_bit_for_bit(test_dataset_d
     # narrow-range noise puts many windows right at the texture test's variance limit
     noisy = [np.clip(rng.normal(rng.uniform(100, 200), rng.uniform(2, 14), (160, 320, 3)), 0, 255).astype(np.uint8)
              for _ in range(20)]
-    shade_pixels = 0
+    shade_pixels = near_pixels = 0
     for img in frames + noisy + _colour_sweep_images():
         new, ref = P._pixel_labels(img), P._pixel_labels_opencv(img)
         for a, b in zip(new, ref):
             assert a.dtype == np.uint8 and np.array_equal(a, b)
         shade_pixels += int((ref[3] > 0).sum())
-    assert shade_pixels > 10000
+        near_pixels += int((ref[0] == P._NEAR_SAND_VALUE).sum())
+    assert shade_pixels > 10000 and near_pixels > 1000
 
 
 def test_pixel_labels_follow_changed_thresholds(monkeypatch):
@@ -247,7 +249,7 @@ def test_worldmap_kernel_equals_the_numpy_rules():
     differing = 0
     for trial in range(60):
         mem = P.PerceptionMemory()
-        for votes in (mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes):
+        for votes in (mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.near_sand_votes):
             votes[...] = _tie_votes(rng, votes.shape)
         mem.band_votes[...] = _tie_votes(rng, mem.band_votes.shape)
         mem.band_nav_votes[...] = np.minimum(_tie_votes(rng, mem.band_votes.shape), mem.band_votes)

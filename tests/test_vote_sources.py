@@ -48,14 +48,14 @@ def test_wrong_cells_are_split_by_the_rule_that_marked_them_and_by_shadow():
     mem.obs_votes[50:60, 50:60] = 10
     mem.obs_votes[50:60, 59] = 90  # ... but its east column is dark, half of it in shadow: missed
     mem.nav_votes[50:60, 59] = 0
-    mem.shade_votes[50:55, 59] = 40
+    mem.shade_votes[50:55, 59] = 60
     mem.nav_votes[60, 50:60] = 80  # a sunlit fringe row north of it: false by the light share
     mem.obs_votes[60, 50:60] = 20
     mem.shade_votes[40, 40] = mem.obs_votes[40, 40] = 10  # a cell of shadowed sand only: false by the majority
     w = wrong_cells_by_rule(mem, truth)
     assert w["false"] == {"cells": 11, "light": 10, "shade": 1, "model": 0, "shadow_share_over_0.05": 1,
                           "shadow_share_over_0.2": 1}
-    # the dark half of the east column is missed; its shadowed half (0.44 sand, floor beside it) the cell model maps
+    # the dark half of the east column is missed; its shadowed half (0.67 sand, floor beside it) the cell model maps
     assert w["missed"] == {"cells": 5, "seen": 5, "shadow_share_over_0.05": 0, "shadow_share_over_0.2": 0}
     assert (P.render_worldmap(mem)[50:55, 59, 2] == 255).all()
     score = score_map(P.render_worldmap(mem), truth)
