@@ -21,20 +21,21 @@ MAX_FIDELITY_GAP = 2.5  # |twin - real| fidelity, points (-2.1 at stride 6 with 
 SHADOWLESS_GOAL_GAP = 1.5
 
 
+def _real_log(real_logs_dir, name):
+    path = real_logs_dir / name
+    if not path.exists():
+        pytest.skip(f"{name} log not found under {real_logs_dir}")
+    return map_realism.find_log(path)
+
+
 @pytest.fixture(scope="module")
 def megalphian(real_logs_dir, world_dir, ground_truth_path):
-    path = real_logs_dir / "megalphian"
-    if not path.exists():
-        pytest.skip(f"megalphian log not found under {real_logs_dir}")
-    return map_realism.find_log(path)
+    return _real_log(real_logs_dir, "megalphian")
 
 
 @pytest.fixture(scope="module")
 def royalejandro(real_logs_dir, world_dir, ground_truth_path):
-    path = real_logs_dir / "royalejandro"
-    if not path.exists():
-        pytest.skip(f"royalejandro log not found under {real_logs_dir}")
-    return map_realism.find_log(path)
+    return _real_log(real_logs_dir, "royalejandro")
 
 
 @pytest.fixture(scope="module")
