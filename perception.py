@@ -59,9 +59,9 @@ POCKET_SAND_MIN_R = 130  # shadowed sand at least this red also counts for the s
 SHADE_SAND_MIN_G_PER_R = 0.90  # green / red at least this (slope feet and rock faces are redder)
 SHADE_SAND_MIN_B_PER_R = 0.83  # blue / red at least this (gold samples and brown rock have little blue)
 # sand just outside that hue: cast-shadowed sand sits on the 0.90 / 0.83 lines (test_dataset: medians 0.904 / 0.830),
-# so the rule takes about half of it; the looser band also takes walls on drives without cast shadow, so it gets
-# its own vote, weighed by the scored cell model (perception.md, ninth round)
-NEAR_SAND_MIN_G_PER_R = 0.88  # green / red at least this for near-hue sand (smooth, R >= SHADE_SAND_MIN_R, not shadowed sand)
+# so the rule takes about half of it; the looser band takes more wall than sand on the real drives, so it gets its
+# own vote, weighed by the scored cell model (perception.md, ninth round)
+NEAR_SAND_MIN_G_PER_R = 0.88  # green / red at least this for near-hue sand (smooth, R >= SHADE_SAND_MIN_R, not shadowed)
 NEAR_SAND_MIN_B_PER_R = 0.80  # blue / red at least this for near-hue sand
 SHADE_SAND_MAX_SD = 10.0  # red standard deviation in the window at most this (rough rock is textured), 0..255
 SHADE_SAND_WINDOW_W_PX = 7  # width of the window for that texture test, px
@@ -538,14 +538,15 @@ def _worldmap_fast(mem: PerceptionMemory, out: np.ndarray, y0, y1, x0, x1, drive
     f32 = np.float32  # NumPy compares and scales a float32 array by a Python float in float32 (NEP 50)
     model = np.array([*scored_cell_weights(), scored_logit_min()], np.float32)
     _worldmap_kernel(mem.nav_votes, mem.obs_votes, mem.shade_votes, mem.dim_shade_votes, mem.near_sand_votes,
-                     mem.band_nav_votes, mem.band_votes, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive, f32(MIN_CELL_VOTES),
-                     f32(NAV_MAJORITY), f32(SCORED_NAV_MAJORITY), f32(SCORED_BAND_MIN_SHARE), f32(SCORED_BAND_SHARE),
-                     f32(SHADE_MAJORITY), model, out)
+                     mem.band_nav_votes, mem.band_votes, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive,
+                     f32(MIN_CELL_VOTES), f32(NAV_MAJORITY), f32(SCORED_NAV_MAJORITY), f32(SCORED_BAND_MIN_SHARE),
+                     f32(SCORED_BAND_SHARE), f32(SHADE_MAJORITY), model, out)
 
 
 @njit(cache=True)
-def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, near_v, band_nav, band_all, py0, py1, px0, px1, gy0, gy1, gx0, gx1, drive,
-                     min_votes, nav_major, scored_major, band_min_share, band_share, shade_major, model, out):
+def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, near_v, band_nav, band_all, py0, py1, px0, px1, gy0, gy1, gx0,
+                     gx1, drive, min_votes, nav_major, scored_major, band_min_share, band_share, shade_major, model,
+                     out):
     """Cells of (py0:py1, px0:px1) classified by the vote-share rules (drive: light sand only; else the scored
     band rule plus shadowed sand), then on (gy0:gy1, gx0:gx1) either those rules (drive) or the scored cell
     model (``model`` = light, sand, shade, near-hue and neighbour weights, bias, log-odds threshold) on the shares and
@@ -977,8 +978,8 @@ def _pixel_labels(img: np.ndarray):
     """(labels8, nav8, rock8, shade8) of a camera frame in one compiled pass.
 
     labels8: 255 light sand, _SHADE_VALUE sand in shadow, _DIM_SHADE_VALUE darker sand in shadow,
-    _NEAR_SAND_VALUE near-hue sand, 0 anything else (what label_grid warps); the others uint8 0/255 masks as navigable_mask,
-    rock_mask and shadowed_sand_mask give them.  Bit for bit what the OpenCV/NumPy chain of
+    _NEAR_SAND_VALUE near-hue sand, 0 anything else (what label_grid warps); the others uint8 0/255 masks as
+    navigable_mask, rock_mask and shadowed_sand_mask give them.  Bit for bit what the OpenCV/NumPy chain of
     those functions gives (tests/test_fast_paths_exact.py), at a fraction of its dozen passes.
     """
     if SHADE_SAND_WINDOW_H_PX != 1:  # the kernel slides a one-row window only

@@ -3,7 +3,8 @@
 The scored map (``rover.worldmap``) calls a seen cell floor when a logistic model of map_bw on five
 figures of the cell says so (perception.SCORED_CELL_*; issue 27, eighth and ninth perception rounds): its
 light-sand share, its sand share, its shadowed-sand share, its near-hue sand share and how many of its
-neighbours the vote-share rules call floor.  This tool makes those weights reproducible and keeps fitted and checked drives apart:
+neighbours the vote-share rules call floor.  This tool makes those weights reproducible and keeps fitted and
+checked drives apart:
 
 - ``collect`` replays real logs (``--log NAME=PATH``) and runs twin missions (``--twin SEED:SHADOWS:FPS:LATENCY``)
   and saves each drive's final map votes as ``DIR/NAME.npz``.  The planner reads the drive map, not the scored

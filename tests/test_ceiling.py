@@ -40,7 +40,7 @@ def test_map_bw_leaves_out_edge_floor_but_an_oracle_reaches_the_goal(world_dir, 
     best = max((p for p in r.points[1:] if p.fidelity_pct >= 95.0), key=lambda p: p.mapped_pct)
     assert best.mapped_pct >= 98.0  # knowing geometry and sand texture would meet 98 / 95
     strict = [p for p in r.points[1:] if p.fidelity_pct >= 98.0]
-    assert strict and max(p.mapped_pct for p in strict) >= 98.0  # ... and even 98 / 98: the lines are inside reach
+    assert strict and max(p.mapped_pct for p in strict) >= 98.0  # ... even 98 / 98: the lines are in reach
 
 
 def test_cli_needs_the_real_world(tmp_path):
