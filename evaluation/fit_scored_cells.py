@@ -52,9 +52,12 @@ def load_memory(path) -> perception.PerceptionMemory:
     """A PerceptionMemory holding the votes saved by :func:`save_memory`."""
     mem = perception.PerceptionMemory()
     with np.load(path) as z:
+        missing = [f for f in MEMORY_FIELDS if f not in z]
+        if missing == ["near_sand_votes"]:
+            raise ValueError(f"{path} was collected before near-hue sand (perception's ninth round): collect it again")
+        if missing:
+            raise ValueError(f"{path} has no {missing[0]!r}: not a map-votes file of this tool")
         for f in MEMORY_FIELDS:
-            if f not in z:
-                raise ValueError(f"{path} has no {f!r}: not a map-votes file of this tool")
             setattr(mem, f, z[f].astype(np.float32))
     return mem
 

@@ -24,6 +24,10 @@ def test_memory_files_round_trip_and_a_foreign_file_is_refused(tmp_path):
     np.savez(tmp_path / "b.npz", nav_votes=np.zeros((200, 200)))
     with pytest.raises(ValueError, match="obs_votes"):
         F.load_memory(tmp_path / "b.npz")
+    older = {f: getattr(mem, f) for f in F.MEMORY_FIELDS if f != "near_sand_votes"}  # a file from before round 9
+    np.savez(tmp_path / "c.npz", **older)
+    with pytest.raises(ValueError, match="collect it again"):
+        F.load_memory(tmp_path / "c.npz")
 
 
 def test_the_model_map_is_the_scored_map(tmp_path):
