@@ -43,8 +43,8 @@ PATH_EVERY = 10  # errors.png draws every Nth rover position
 NEAR_CONFIRM_RANGE_M = 5.0  # votes from ground nearer than this to the rover are near views, m
 NEAR_CONFIRM_MIN_VOTES = 2.0  # weighted near votes a cell needs before the check applies to it
 # The curve and the checks vary what decides the scored map: since round 8 the cell model's probability
-# threshold (SCORED_CELL_MIN_P, 0.375); rounds 4-7 varied the band-mean share (SCORED_BAND_SHARE), which now only
-# decides which neighbours count as floor.
+# threshold (SCORED_CELL_MIN_P: 0.375 in round 8, 0.4 since round 9); rounds 4-7 varied the band-mean share
+# (SCORED_BAND_SHARE), which now only decides which neighbours count as floor.
 NEAR_CHECKS = ((0.3, 0.5), (0.375, 0.4), (0.375, 0.5), (0.45, 0.5))  # (cell model probability, near sand share) reported
 CURVE_SHARES = tuple(np.round(np.arange(0.2, 0.651, 0.025), 3))  # cell model probabilities of the reference curve
 # Wrong cells by the rule that decided them and by how much cast shadow their votes saw (issue 27, round 6)
