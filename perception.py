@@ -32,7 +32,7 @@ import json
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple
+from typing import List, NamedTuple, Optional, Tuple
 
 import cv2
 import numpy as np
@@ -99,13 +99,16 @@ MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 # The scored map itself (issue 27, round 8) weighs a cell's shares and its neighbours in one logistic model of
 # map_bw: a rim cell is part sand and part wall, and whether its centre is floor shows in its shares and in how
 # much floor surrounds it together, not in either alone.  Fitted by `python -m evaluation.fit_scored_cells` on
-# megalphian, test_dataset and twin missions (seeds 0-3 shadows off, 0-2 on); checked on the other drives (round 9).
-SCORED_CELL_W_LIGHT = 4.41  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
-SCORED_CELL_W_SAND = 4.38  # logit per unit of light plus shadowed sand share
-SCORED_CELL_W_SHADE = 4.47  # logit per unit of shadowed sand share (both shades)
-SCORED_CELL_W_NEAR = 4.18  # logit per unit of near-hue sand share (NEAR_SAND_MIN_*)
+# megalphian, test_dataset and twin missions (seeds 0-3 shadows off, 0-2 on); checked on the other drives (round 10:
+# the floor-side terms; the canyon is lit from one side, so which side of a rim cell the floor lies on matters).
+SCORED_CELL_W_LIGHT = 4.51  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
+SCORED_CELL_W_SAND = 4.37  # logit per unit of light plus shadowed sand share
+SCORED_CELL_W_SHADE = 4.23  # logit per unit of shadowed sand share (both shades)
+SCORED_CELL_W_NEAR = 4.25  # logit per unit of near-hue sand share (NEAR_SAND_MIN_*)
 SCORED_CELL_W_NEIGHBOUR = 0.45  # logit per neighbour (of 8) the vote-share rules call navigable
-SCORED_CELL_BIAS = -5.97  # logit of a cell with no sand and no floor around it
+SCORED_CELL_W_FLOOR_EAST = 0.07  # logit per unit of floor-side east: floor neighbours east minus those west
+SCORED_CELL_W_FLOOR_NORTH = 0.10  # logit per unit of floor-side north: floor neighbours north minus those south
+SCORED_CELL_BIAS = -5.98  # logit of a cell with no sand and no floor around it
 SCORED_CELL_MIN_P = 0.400  # a seen cell is navigable on the scored map when the model's probability exceeds this, 0..1
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 LOOK_RANGE_MAX_M = 4.0  # the closest-look map (how near the camera has seen each cell) records looks up to this, m
@@ -549,8 +552,9 @@ def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, near_v, band_nav, band_all, p
                      out):
     """Cells of (py0:py1, px0:px1) classified by the vote-share rules (drive: light sand only; else the scored
     band rule plus shadowed sand), then on (gy0:gy1, gx0:gx1) either those rules (drive) or the scored cell
-    model (``model`` = light, sand, shade, near-hue and neighbour weights, bias, log-odds threshold) on the shares and
-    the rules' navigable neighbours, written to out's R (seen, not navigable) and B (navigable) channels as 0/255.
+    model (``model`` = light, sand, shade, near-hue, neighbour, floor-side east and north weights, bias, log-odds
+    threshold) on the shares and the rules' navigable neighbours, written to out's R (seen, not navigable) and B
+    (navigable) channels as 0/255.
 
     Bit-exactness with the NumPy rules: every sum, product, quotient and comparison in float32 as NumPy does
     them on float32 arrays with Python-float constants (the constants arrive as float32); the band sums in band
@@ -603,18 +607,23 @@ def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, near_v, band_nav, band_all, p
             nav_here = is_nav[i, j]
             if not drive and seen[i, j]:
                 neighbours = 0
+                floor_east = 0
+                floor_north = 0
                 for di in range(-1, 2):
                     for dj in range(-1, 2):
                         ii, jj = i + di, j + dj
                         if (di != 0 or dj != 0) and 0 <= ii < ph and 0 <= jj < pw:
                             neighbours += is_nav[ii, jj]
+                            floor_east += dj * is_nav[ii, jj]
+                            floor_north += di * is_nav[ii, jj]
                 total = nav_v[yy, xx] + obs_v[yy, xx]
                 sand = ((nav_v[yy, xx] + shade_v[yy, xx]) + dim_v[yy, xx]) / total
                 shade = (shade_v[yy, xx] + dim_v[yy, xx]) / total
                 near = near_v[yy, xx] / total
-                logit = ((((model[0] * light_share[i, j] + model[1] * sand) + model[2] * shade) + model[3] * near)
-                         + model[4] * np.float32(neighbours)) + model[5]
-                nav_here = logit > model[6]
+                logit = ((((((model[0] * light_share[i, j] + model[1] * sand) + model[2] * shade) + model[3] * near)
+                           + model[4] * np.float32(neighbours)) + model[5] * np.float32(floor_east))
+                         + model[6] * np.float32(floor_north)) + model[7]
+                nav_here = logit > model[8]
             out[yy, xx, 2] = 255 if nav_here else 0
             out[yy, xx, 0] = 255 if (seen[i, j] and not nav_here) else 0
 
@@ -658,18 +667,31 @@ def _sand_votes(mem: PerceptionMemory, y0, y1, x0, x1, dim_shade=True) -> np.nda
     return sand + mem.dim_shade_votes[y0:y1, x0:x1] if dim_shade else sand
 
 
-def scored_cell_features(mem: PerceptionMemory, y0, y1, x0, x1):
-    """(seen, light, sand, shade, near, neighbours) float32 arrays for the window: the scored cell model's inputs.
+class CellFeatures(NamedTuple):
+    """The scored cell model's inputs for a window, float32 arrays (0 where the cell is not seen)."""
+    seen: np.ndarray  # bool: the cell has MIN_CELL_VOTES
+    light: np.ndarray  # the band-mean light-sand share (the plain share where no band speaks)
+    sand: np.ndarray  # light plus shadowed sand, a share of the votes
+    shade: np.ndarray  # shadowed sand alone
+    near: np.ndarray  # near-hue sand alone
+    neighbours: np.ndarray  # how many of the 8 neighbours the vote-share rules (scored) call navigable
+    floor_east: np.ndarray  # of those, the ones east of the cell minus the ones west of it (-3..3)
+    floor_north: np.ndarray  # ...and north minus south (-3..3)
 
-    light: the band-mean light-sand share (the plain share where no band speaks); sand: light plus shadowed
-    sand as a share of the votes; shade: shadowed sand alone; near: near-hue sand alone; neighbours: how many
-    of the 8 neighbours the vote-share rules (`_majority_navigable`, scored) call navigable.  0 where the cell
-    is not seen.
+
+def scored_cell_features(mem: PerceptionMemory, y0, y1, x0, x1) -> CellFeatures:
+    """The scored cell model's inputs for the window (`CellFeatures`).
+
+    The floor side matters because the canyon is lit from one side: a wall whose foot faces the light reads
+    brighter (over-mapped), one facing away darker (under-mapped), on real and twin frames alike (tenth round).
     """
     py0, py1, px0, px1 = _grown(y0, y1, x0, x1)
     _, rule_nav = _majority_navigable(mem, py0, py1, px0, px1, scored=True)
-    counts = cv2.filter2D(rule_nav.view(np.uint8), cv2.CV_16S, _EIGHT_NEIGHBOURS, borderType=cv2.BORDER_CONSTANT)
-    neighbours = counts[y0 - py0:y0 - py0 + (y1 - y0), x0 - px0:x0 - px0 + (x1 - x0)].astype(np.float32)
+
+    def around(kernel):
+        counts = cv2.filter2D(rule_nav.view(np.uint8), cv2.CV_16S, kernel, borderType=cv2.BORDER_CONSTANT)
+        return counts[y0 - py0:y0 - py0 + (y1 - y0), x0 - px0:x0 - px0 + (x1 - x0)].astype(np.float32)
+
     nav = mem.nav_votes[y0:y1, x0:x1]
     total = nav + mem.obs_votes[y0:y1, x0:x1]
     seen = total >= MIN_CELL_VOTES
@@ -680,21 +702,23 @@ def scored_cell_features(mem: PerceptionMemory, y0, y1, x0, x1):
     shade = (mem.shade_votes[y0:y1, x0:x1] + mem.dim_shade_votes[y0:y1, x0:x1]) / safe
     near = mem.near_sand_votes[y0:y1, x0:x1] / safe
     zero = np.float32(0.0)
-    return (seen, np.where(seen, light, zero), np.where(seen, sand, zero), np.where(seen, shade, zero),
-            np.where(seen, near, zero), np.where(seen, neighbours, zero))
+    figures = (light, sand, shade, near, around(_EIGHT_NEIGHBOURS), around(_FLOOR_EAST), around(_FLOOR_NORTH))
+    return CellFeatures(seen, *(np.where(seen, f, zero) for f in figures))
 
 
-def scored_cell_logit(light, sand, shade, near, neighbours):
+def scored_cell_logit(light, sand, shade, near, neighbours, floor_east, floor_north):
     """The scored cell model's log-odds that a cell is map_bw floor (float32, summed in a fixed order so the
     compiled kernel gives the same bits)."""
-    return ((((SCORED_CELL_W_LIGHT * light + SCORED_CELL_W_SAND * sand) + SCORED_CELL_W_SHADE * shade)
-             + SCORED_CELL_W_NEAR * near) + SCORED_CELL_W_NEIGHBOUR * neighbours) + SCORED_CELL_BIAS
+    return ((((((SCORED_CELL_W_LIGHT * light + SCORED_CELL_W_SAND * sand) + SCORED_CELL_W_SHADE * shade)
+               + SCORED_CELL_W_NEAR * near) + SCORED_CELL_W_NEIGHBOUR * neighbours)
+             + SCORED_CELL_W_FLOOR_EAST * floor_east) + SCORED_CELL_W_FLOOR_NORTH * floor_north) + SCORED_CELL_BIAS
 
 
-def scored_cell_weights() -> Tuple[float, float, float, float, float, float]:
-    """The cell model's weights in `scored_cell_logit`'s order: light, sand, shade, near-hue, per neighbour, bias."""
+def scored_cell_weights() -> Tuple[float, ...]:
+    """The cell model's weights in `scored_cell_logit`'s order (light, sand, shade, near-hue, per neighbour,
+    floor-side east, floor-side north), then its bias."""
     return (SCORED_CELL_W_LIGHT, SCORED_CELL_W_SAND, SCORED_CELL_W_SHADE, SCORED_CELL_W_NEAR,
-            SCORED_CELL_W_NEIGHBOUR, SCORED_CELL_BIAS)
+            SCORED_CELL_W_NEIGHBOUR, SCORED_CELL_W_FLOOR_EAST, SCORED_CELL_W_FLOOR_NORTH, SCORED_CELL_BIAS)
 
 
 def scored_logit_min(min_p: Optional[float] = None) -> float:
@@ -705,8 +729,8 @@ def scored_logit_min(min_p: Optional[float] = None) -> float:
 
 def _scored_navigable(mem: PerceptionMemory, y0, y1, x0, x1):
     """(seen, navigable) for the scored map: the cell model on the window's shares and neighbours."""
-    seen, light, sand, shade, near, neighbours = scored_cell_features(mem, y0, y1, x0, x1)
-    return seen, seen & (scored_cell_logit(light, sand, shade, near, neighbours) > scored_logit_min())
+    seen, *figures = scored_cell_features(mem, y0, y1, x0, x1)
+    return seen, seen & (scored_cell_logit(*figures) > scored_logit_min())
 
 
 def _grown(y0, y1, x0, x1):
@@ -715,6 +739,8 @@ def _grown(y0, y1, x0, x1):
 
 
 _EIGHT_NEIGHBOURS = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], np.float32)  # kernel counting a cell's neighbours
+_FLOOR_EAST = np.array([[-1, 0, 1], [-1, 0, 1], [-1, 0, 1]], np.float32)  # ...those east (x + 1) minus those west
+_FLOOR_NORTH = np.array([[-1, -1, -1], [0, 0, 0], [1, 1, 1]], np.float32)  # ...those north (row y + 1) minus south
 
 
 def rocks_from_memory(mem: PerceptionMemory) -> List[Tuple[float, float]]:

@@ -273,7 +273,7 @@ def test_edge_sand_in_deep_shadow_is_found_but_darker_walls_are_not():
 
 def _fringe_is_all_the_scored_map_turns_down(mem, turned_down):
     """The cells of ``turned_down`` that are not light-sand fringe (plain light share < 0.35, <= 4 floor neighbours)."""
-    *_, neighbours = P.scored_cell_features(mem, 0, P.WORLD_SIZE, 0, P.WORLD_SIZE)
+    neighbours = P.scored_cell_features(mem, 0, P.WORLD_SIZE, 0, P.WORLD_SIZE).neighbours
     plain = mem.nav_votes / np.maximum(mem.nav_votes + mem.obs_votes, 1e-6)
     return np.flatnonzero(turned_down & ~((plain < 0.35) & (neighbours <= 4)))
 
@@ -353,7 +353,7 @@ def test_the_cell_model_weighs_near_hue_sand_as_floor_evidence():
     assert P.render_worldmap(wall)[100, 100].tolist() == [255, 0, 0]
     assert P.render_worldmap(near)[100, 100].tolist() == [0, 0, 255]
     assert P.render_worldmap(near, drive=True)[100, 100, 2] == 0  # never driven on
-    assert P.scored_cell_features(near, 100, 101, 100, 101)[4][0, 0] == pytest.approx(0.6)
+    assert P.scored_cell_features(near, 100, 101, 100, 101).near[0, 0] == pytest.approx(0.6)
 
 
 def test_sand_in_shadow_right_under_a_wall_is_found():
@@ -541,9 +541,9 @@ def test_scored_map_gives_each_range_band_an_equal_say():
     light share is the mean of the bands' (0.475), so with floor around it the cell is floor (issue 27, round 5)."""
     floor = _surround_with_floor(_banded_cell(90, 100, 100, 2000), 8)
     assert floor.nav_votes[100, 100] < P.SCORED_NAV_MAJORITY * (floor.nav_votes[100, 100] + floor.obs_votes[100, 100])
-    seen, light, sand, _, near, neighbours = P.scored_cell_features(floor, 100, 101, 100, 101)
-    assert seen[0, 0] and light[0, 0] == pytest.approx(0.475) and sand[0, 0] == pytest.approx(190 / 2100)
-    assert neighbours[0, 0] == 8 and near[0, 0] == 0
+    f = P.scored_cell_features(floor, 100, 101, 100, 101)
+    assert f.seen[0, 0] and f.light[0, 0] == pytest.approx(0.475) and f.sand[0, 0] == pytest.approx(190 / 2100)
+    assert f.neighbours[0, 0] == 8 and f.near[0, 0] == 0 and f.floor_east[0, 0] == f.floor_north[0, 0] == 0
     assert P.render_worldmap(floor)[100, 100, 2] == 255
     assert P.render_worldmap(floor, drive=True)[100, 100, 2] == 0  # the planner's map is unchanged: summed votes
     summed = _surround_with_floor(_mixed_cell(190 / 2100), 8)  # the same votes without their ranges
@@ -560,7 +560,7 @@ def test_a_band_with_too_few_votes_has_no_say():
     mem.band_nav_votes[-1, 100, 100], mem.band_votes[-1, 100, 100] = 1, 2
     mem.band_nav_votes[-2, 100, 100], mem.band_votes[-2, 100, 100] = 1, 2
     assert not P.band_light_share(mem)[1][100, 100]
-    assert P.scored_cell_features(mem, 100, 101, 100, 101)[1][0, 0] == pytest.approx(0.5)
+    assert P.scored_cell_features(mem, 100, 101, 100, 101).light[0, 0] == pytest.approx(0.5)
     assert P.render_worldmap(_surround_with_floor(mem))[100, 100, 2] == 255
 
 
