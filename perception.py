@@ -100,14 +100,13 @@ MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 # map_bw: a rim cell is part sand and part wall, and whether its centre is floor shows in its shares and in how
 # much floor surrounds it together, not in either alone.  Fitted by `python -m evaluation.fit_scored_cells` on
 # megalphian, test_dataset and twin missions (seeds 0-3 shadows off, 0-2 on); checked on the other drives (round 10:
-# the floor-side terms; the canyon is lit from one side, so which side of a rim cell the floor lies on matters).
-SCORED_CELL_W_LIGHT = 4.51  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
+# the floor-side term; the canyon is lit from one side, so which side of a rim cell the floor lies on matters).
+SCORED_CELL_W_LIGHT = 4.49  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
 SCORED_CELL_W_SAND = 4.37  # logit per unit of light plus shadowed sand share
-SCORED_CELL_W_SHADE = 4.23  # logit per unit of shadowed sand share (both shades)
-SCORED_CELL_W_NEAR = 4.25  # logit per unit of near-hue sand share (NEAR_SAND_MIN_*)
+SCORED_CELL_W_SHADE = 4.37  # logit per unit of shadowed sand share (both shades)
+SCORED_CELL_W_NEAR = 4.20  # logit per unit of near-hue sand share (NEAR_SAND_MIN_*)
 SCORED_CELL_W_NEIGHBOUR = 0.45  # logit per neighbour (of 8) the vote-share rules call navigable
-SCORED_CELL_W_FLOOR_EAST = 0.07  # logit per unit of floor-side east: floor neighbours east minus those west
-SCORED_CELL_W_FLOOR_NORTH = 0.10  # logit per unit of floor-side north: floor neighbours north minus those south
+SCORED_CELL_W_FLOOR_NE = 0.08  # logit per unit of floor toward the north-east (neighbours' east + north offsets, -6..6)
 SCORED_CELL_BIAS = -5.98  # logit of a cell with no sand and no floor around it
 SCORED_CELL_MIN_P = 0.400  # a seen cell is navigable on the scored map when the model's probability exceeds this, 0..1
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
@@ -552,7 +551,7 @@ def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, near_v, band_nav, band_all, p
                      out):
     """Cells of (py0:py1, px0:px1) classified by the vote-share rules (drive: light sand only; else the scored
     band rule plus shadowed sand), then on (gy0:gy1, gx0:gx1) either those rules (drive) or the scored cell
-    model (``model`` = light, sand, shade, near-hue, neighbour, floor-side east and north weights, bias, log-odds
+    model (``model`` = light, sand, shade, near-hue, neighbour and floor-north-east weights, bias, log-odds
     threshold) on the shares and the rules' navigable neighbours, written to out's R (seen, not navigable) and B
     (navigable) channels as 0/255.
 
@@ -607,23 +606,20 @@ def _worldmap_kernel(nav_v, obs_v, shade_v, dim_v, near_v, band_nav, band_all, p
             nav_here = is_nav[i, j]
             if not drive and seen[i, j]:
                 neighbours = 0
-                floor_east = 0
-                floor_north = 0
+                floor_ne = 0
                 for di in range(-1, 2):
                     for dj in range(-1, 2):
                         ii, jj = i + di, j + dj
                         if (di != 0 or dj != 0) and 0 <= ii < ph and 0 <= jj < pw:
                             neighbours += is_nav[ii, jj]
-                            floor_east += dj * is_nav[ii, jj]
-                            floor_north += di * is_nav[ii, jj]
+                            floor_ne += (di + dj) * is_nav[ii, jj]
                 total = nav_v[yy, xx] + obs_v[yy, xx]
                 sand = ((nav_v[yy, xx] + shade_v[yy, xx]) + dim_v[yy, xx]) / total
                 shade = (shade_v[yy, xx] + dim_v[yy, xx]) / total
                 near = near_v[yy, xx] / total
-                logit = ((((((model[0] * light_share[i, j] + model[1] * sand) + model[2] * shade) + model[3] * near)
-                           + model[4] * np.float32(neighbours)) + model[5] * np.float32(floor_east))
-                         + model[6] * np.float32(floor_north)) + model[7]
-                nav_here = logit > model[8]
+                logit = (((((model[0] * light_share[i, j] + model[1] * sand) + model[2] * shade) + model[3] * near)
+                          + model[4] * np.float32(neighbours)) + model[5] * np.float32(floor_ne)) + model[6]
+                nav_here = logit > model[7]
             out[yy, xx, 2] = 255 if nav_here else 0
             out[yy, xx, 0] = 255 if (seen[i, j] and not nav_here) else 0
 
@@ -675,15 +671,15 @@ class CellFeatures(NamedTuple):
     shade: np.ndarray  # shadowed sand alone
     near: np.ndarray  # near-hue sand alone
     neighbours: np.ndarray  # how many of the 8 neighbours the vote-share rules (scored) call navigable
-    floor_east: np.ndarray  # of those, the ones east of the cell minus the ones west of it (-3..3)
-    floor_north: np.ndarray  # ...and north minus south (-3..3)
+    floor_ne: np.ndarray  # those neighbours' offsets east plus north, summed (-6..6: floor lies north-east if > 0)
 
 
 def scored_cell_features(mem: PerceptionMemory, y0, y1, x0, x1) -> CellFeatures:
     """The scored cell model's inputs for the window (`CellFeatures`).
 
-    The floor side matters because the canyon is lit from one side: a wall whose foot faces the light reads
-    brighter (over-mapped), one facing away darker (under-mapped), on real and twin frames alike (tenth round).
+    The floor side matters because the canyon is lit from one side: on real and twin frames alike, rims with the
+    floor to their south-west (the floor's north-east edges) read too much like floor, the others too little
+    (tenth round).
     """
     py0, py1, px0, px1 = _grown(y0, y1, x0, x1)
     _, rule_nav = _majority_navigable(mem, py0, py1, px0, px1, scored=True)
@@ -702,23 +698,23 @@ def scored_cell_features(mem: PerceptionMemory, y0, y1, x0, x1) -> CellFeatures:
     shade = (mem.shade_votes[y0:y1, x0:x1] + mem.dim_shade_votes[y0:y1, x0:x1]) / safe
     near = mem.near_sand_votes[y0:y1, x0:x1] / safe
     zero = np.float32(0.0)
-    figures = (light, sand, shade, near, around(_EIGHT_NEIGHBOURS), around(_FLOOR_EAST), around(_FLOOR_NORTH))
+    figures = (light, sand, shade, near, around(_EIGHT_NEIGHBOURS), around(_FLOOR_NORTH_EAST))
     return CellFeatures(seen, *(np.where(seen, f, zero) for f in figures))
 
 
-def scored_cell_logit(light, sand, shade, near, neighbours, floor_east, floor_north):
+def scored_cell_logit(light, sand, shade, near, neighbours, floor_ne):
     """The scored cell model's log-odds that a cell is map_bw floor (float32, summed in a fixed order so the
     compiled kernel gives the same bits)."""
-    return ((((((SCORED_CELL_W_LIGHT * light + SCORED_CELL_W_SAND * sand) + SCORED_CELL_W_SHADE * shade)
-               + SCORED_CELL_W_NEAR * near) + SCORED_CELL_W_NEIGHBOUR * neighbours)
-             + SCORED_CELL_W_FLOOR_EAST * floor_east) + SCORED_CELL_W_FLOOR_NORTH * floor_north) + SCORED_CELL_BIAS
+    return (((((SCORED_CELL_W_LIGHT * light + SCORED_CELL_W_SAND * sand) + SCORED_CELL_W_SHADE * shade)
+              + SCORED_CELL_W_NEAR * near) + SCORED_CELL_W_NEIGHBOUR * neighbours)
+            + SCORED_CELL_W_FLOOR_NE * floor_ne) + SCORED_CELL_BIAS
 
 
 def scored_cell_weights() -> Tuple[float, ...]:
     """The cell model's weights in `scored_cell_logit`'s order (light, sand, shade, near-hue, per neighbour,
-    floor-side east, floor-side north), then its bias."""
+    floor toward the north-east), then its bias."""
     return (SCORED_CELL_W_LIGHT, SCORED_CELL_W_SAND, SCORED_CELL_W_SHADE, SCORED_CELL_W_NEAR,
-            SCORED_CELL_W_NEIGHBOUR, SCORED_CELL_W_FLOOR_EAST, SCORED_CELL_W_FLOOR_NORTH, SCORED_CELL_BIAS)
+            SCORED_CELL_W_NEIGHBOUR, SCORED_CELL_W_FLOOR_NE, SCORED_CELL_BIAS)
 
 
 def scored_logit_min(min_p: Optional[float] = None) -> float:
@@ -739,8 +735,7 @@ def _grown(y0, y1, x0, x1):
 
 
 _EIGHT_NEIGHBOURS = np.array([[1, 1, 1], [1, 0, 1], [1, 1, 1]], np.float32)  # kernel counting a cell's neighbours
-_FLOOR_EAST = np.array([[-1, 0, 1], [-1, 0, 1], [-1, 0, 1]], np.float32)  # ...those east (x + 1) minus those west
-_FLOOR_NORTH = np.array([[-1, -1, -1], [0, 0, 0], [1, 1, 1]], np.float32)  # ...those north (row y + 1) minus south
+_FLOOR_NORTH_EAST = np.array([[-2, -1, 0], [-1, 0, 1], [0, 1, 2]], np.float32)  # ...their east + north offsets
 
 
 def rocks_from_memory(mem: PerceptionMemory) -> List[Tuple[float, float]]:

@@ -1,10 +1,10 @@
 """Fit the scored map's cell model: ``python -m evaluation.fit_scored_cells collect|fit``.
 
-The scored map (``rover.worldmap``) calls a seen cell floor when a logistic model of map_bw on seven
+The scored map (``rover.worldmap``) calls a seen cell floor when a logistic model of map_bw on six
 figures of the cell says so (perception.SCORED_CELL_*; issue 27, perception rounds 8-10): its
 light-sand share, its sand share, its shadowed-sand share, its near-hue sand share, how many of its
-neighbours the vote-share rules call floor, and on which side those lie (east minus west, north minus
-south).  This tool makes those weights reproducible and keeps fitted and checked drives apart:
+neighbours the vote-share rules call floor, and whether those lie to its north-east or south-west.  This
+tool makes those weights reproducible and keeps fitted and checked drives apart:
 
 - ``collect`` replays real logs (``--log NAME=PATH``) and runs twin missions (``--twin SEED:SHADOWS:FPS:LATENCY``)
   and saves each drive's final map votes as ``DIR/NAME.npz``.  The planner reads the drive map, not the scored
@@ -63,7 +63,7 @@ def load_memory(path) -> perception.PerceptionMemory:
 
 
 def cell_table(mem):
-    """(seen (200, 200) bool, X (n, 7) float32): the model's inputs for every seen cell, in the map's order."""
+    """(seen (200, 200) bool, X (n, 6) float32): the model's inputs for every seen cell, in the map's order."""
     n = perception.WORLD_SIZE
     seen, *figures = perception.scored_cell_features(mem, 0, n, 0, n)
     return seen, np.stack([f[seen] for f in figures], 1)
@@ -106,7 +106,7 @@ def shortfall(name: str, score) -> float:
 
 
 def shipped_weights():
-    """(weights (7,), bias, probability threshold) of the cell model perception ships."""
+    """(weights (6,), bias, probability threshold) of the cell model perception ships."""
     *weights, bias = perception.scored_cell_weights()
     return np.array(weights), bias, perception.SCORED_CELL_MIN_P
 
@@ -119,7 +119,7 @@ def fit_report(drives: dict, fitted: list, truth) -> str:
     checked = [n for n in drives if n not in fitted]
     lines = [f"fitted on {len(fitted)} drive{'' if len(fitted) == 1 else 's'} ({len(y)} cells): weights light {weights[0]:.3f}, sand {weights[1]:.3f}, "
              f"shade {weights[2]:.3f}, near-hue {weights[3]:.3f}, per neighbour {weights[4]:.3f}, "
-             f"floor-side east {weights[5]:.3f}, north {weights[6]:.3f}; bias {bias:.3f}",
+             f"floor north-east {weights[5]:.3f}; bias {bias:.3f}",
              "", "| probability | shortfall, fitted drives | shortfall, checked drives |", "|---|---|---|"]
     scores = {n: [score_map(model_map(*drives[n], weights, bias, p), truth * 255) for p in THRESHOLDS] for n in drives}
     for i, p in enumerate(THRESHOLDS):

@@ -525,6 +525,39 @@ def test_closest_look_map_ignores_cells_at_the_side_of_the_view():
     assert looked[100, 101] and looked[100, 102]  # straight ahead they are
 
 
+def _rim_cell(light_share, floor_side):
+    """Cell (100, 100) of that light share with three floor neighbours in a row on one side ([y, x]; y is north)."""
+    mem = _mixed_cell(light_share)
+    dy, dx = {"north": (1, 0), "south": (-1, 0), "east": (0, 1), "west": (0, -1)}[floor_side]
+    for k in (-1, 0, 1):
+        mem.nav_votes[100 + dy + (k if dx else 0), 100 + dx + (k if dy else 0)] = 20.0
+    return mem
+
+
+def test_floor_side_of_a_rim_cell_is_its_floor_neighbours_east_plus_north_offsets():
+    for side, floor_ne in (("north", 3), ("east", 3), ("south", -3), ("west", -3)):
+        f = P.scored_cell_features(_rim_cell(0.475, side), 99, 102, 99, 102)
+        assert (f.neighbours[1, 1], f.floor_ne[1, 1]) == (3, floor_ne), side
+    corner = _mixed_cell(0.475)
+    corner.nav_votes[101, 101] = 20.0  # one floor neighbour, north-east
+    assert P.scored_cell_features(corner, 100, 101, 100, 101).floor_ne[0, 0] == 2
+    f = P.scored_cell_features(_surround_with_floor(_mixed_cell(0.475)), 100, 101, 100, 101)
+    assert (f.neighbours[0, 0], f.floor_ne[0, 0]) == (8, 0)  # floor all round: no side
+
+
+def test_scored_map_maps_a_south_or_west_rim_more_readily_than_a_north_or_east_one():
+    """The canyon is lit from one side: on real and twin drives alike the rims whose floor lies to their south or
+    west (the floor's north and east edges) read too much like floor, the others too little (issue 27, round 10).
+    The same mixed cell with the same three floor neighbours is floor on one side and wall on the other."""
+    assert P.render_worldmap(_rim_cell(0.475, "north"))[100, 100].tolist() == [0, 0, 255]
+    assert P.render_worldmap(_rim_cell(0.475, "south"))[100, 100].tolist() == [255, 0, 0]
+    assert P.render_worldmap(_rim_cell(0.475, "east"))[100, 100].tolist() == [0, 0, 255]
+    assert P.render_worldmap(_rim_cell(0.475, "west"))[100, 100].tolist() == [255, 0, 0]
+    for side in ("north", "south", "east", "west"):  # the side only tips cells near the line
+        assert P.render_worldmap(_rim_cell(0.6, side))[100, 100, 2] == 255
+        assert P.render_worldmap(_rim_cell(0.3, side))[100, 100, 2] == 0
+
+
 def _banded_cell(near_light, near_all, far_light, far_all, near_band=1):
     """Cell (100, 100) voted on from one near band and from the farthest band (weighted votes)."""
     mem = P.PerceptionMemory()
@@ -543,7 +576,7 @@ def test_scored_map_gives_each_range_band_an_equal_say():
     assert floor.nav_votes[100, 100] < P.SCORED_NAV_MAJORITY * (floor.nav_votes[100, 100] + floor.obs_votes[100, 100])
     f = P.scored_cell_features(floor, 100, 101, 100, 101)
     assert f.seen[0, 0] and f.light[0, 0] == pytest.approx(0.475) and f.sand[0, 0] == pytest.approx(190 / 2100)
-    assert f.neighbours[0, 0] == 8 and f.near[0, 0] == 0 and f.floor_east[0, 0] == f.floor_north[0, 0] == 0
+    assert f.neighbours[0, 0] == 8 and f.near[0, 0] == 0 and f.floor_ne[0, 0] == 0
     assert P.render_worldmap(floor)[100, 100, 2] == 255
     assert P.render_worldmap(floor, drive=True)[100, 100, 2] == 0  # the planner's map is unchanged: summed votes
     summed = _surround_with_floor(_mixed_cell(190 / 2100), 8)  # the same votes without their ranges
