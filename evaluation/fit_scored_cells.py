@@ -122,16 +122,18 @@ def fit_report(drives: dict, fitted: list, truth) -> str:
              f"floor north-east {weights[5]:.3f}; bias {bias:.3f}",
              "", "| probability | shortfall, fitted drives | shortfall, checked drives |", "|---|---|---|"]
     scores = {n: [score_map(model_map(*drives[n], weights, bias, p), truth * 255) for p in THRESHOLDS] for n in drives}
+    fitted_shortfall = [sum(shortfall(n, scores[n][i]) for n in fitted) for i in range(len(THRESHOLDS))]
     for i, p in enumerate(THRESHOLDS):
-        lines.append(f"| {p:.3f} | {sum(shortfall(n, scores[n][i]) for n in fitted):.2f} | "
-                     f"{sum(shortfall(n, scores[n][i]) for n in checked):.2f} |")
+        lines.append(f"| {p:.3f} | {fitted_shortfall[i]:.2f} | {sum(shortfall(n, scores[n][i]) for n in checked):.2f} |")
+    best = int(np.argmin(fitted_shortfall))  # the per-drive table brackets the fitted drives' best threshold
+    shown = range(max(best - 1, 0), min(best + 2, len(THRESHOLDS)))
     sw, sb, sp = shipped_weights()
-    lines += ["", f"| drive | role | today's constants (p > {sp}) | fitted model, p > 0.350 / 0.375 / 0.400 |",
+    lines += ["", f"| drive | role | today's constants (p > {sp}) | fitted model, p > "
+              f"{' / '.join(f'{THRESHOLDS[i]:.3f}' for i in shown)} (best on the fitted drives: {THRESHOLDS[best]:.3f}) |",
               "|---|---|---|---|"]
     for n in drives:
         today = score_map(model_map(*drives[n], sw, sb, sp), truth * 255)
-        cols = " / ".join(f"{scores[n][THRESHOLDS.index(p)].mapped_pct:.2f}-{scores[n][THRESHOLDS.index(p)].fidelity_pct:.2f}"
-                          for p in (0.35, 0.375, 0.4))
+        cols = " / ".join(f"{scores[n][i].mapped_pct:.2f}-{scores[n][i].fidelity_pct:.2f}" for i in shown)
         lines.append(f"| {n} | {'fitted' if n in fitted else 'checked'} | "
                      f"{today.mapped_pct:.2f} / {today.fidelity_pct:.2f} | {cols} |")
     return "\n".join(lines)

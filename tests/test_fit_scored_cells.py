@@ -1,4 +1,6 @@
 """The scored map's cell model: its fit recovers a known model, and the tool runs on a real log."""
+import re
+
 import numpy as np
 import pytest
 
@@ -51,6 +53,10 @@ def test_collect_and_fit_on_a_real_log(tmp_path, test_dataset_dir, ground_truth_
     assert F.main(["fit", str(tmp_path), "--fit", "td", "--truth", str(ground_truth_path)]) == 0
     out = capsys.readouterr().out
     assert "fitted on 1 drive (" in out and "| td | fitted |" in out
+    shown, best = re.search(r"fitted model, p > ([0-9./ ]+) \(best on the fitted drives: ([0-9.]+)\)", out).groups()
+    assert best in shown.split(" / ")  # the per-drive table brackets the threshold the fitted drives score best at
+    rows = {float(r[0]): float(r[1]) for r in re.findall(r"^\| ([0-9.]+) \| ([0-9.]+) \|", out, re.M)}
+    assert rows[float(best)] == min(rows.values())
     with pytest.raises(SystemExit, match="not in"):
         F.main(["fit", str(tmp_path), "--fit", "nope", "--truth", str(ground_truth_path)])
 
