@@ -162,28 +162,34 @@ def shadowed_sand_mask(rgb: np.ndarray) -> np.ndarray:
     return cv2.bitwise_and(shadowed_sand_u8(rgb), cv2.bitwise_not(cv2.inRange(rgb, NAV_RGB_MIN, (255, 255, 255)))) > 0
 
 
-def shadowed_sand_u8(rgb: np.ndarray, g_per_r: Optional[float] = None, b_per_r: Optional[float] = None) -> np.ndarray:
+def shadowed_sand_u8(rgb: np.ndarray) -> np.ndarray:
     """uint8 0/255 (160, 320): sand-coloured, smooth pixels at or below SHADE_SAND_FIRST_ROW.
 
     Shadow dims every channel alike, so sand keeps its grey-beige ratios; brown
     slope feet, gold samples and dark rock do not.  Rough rock can share the
-    colour but not the smoothness, hence the local spread of red.  ``g_per_r`` / ``b_per_r``
-    replace the hue's minimum ratios (the near-hue band passes NEAR_SAND_MIN_*).
+    colour but not the smoothness, hence the local spread of red.
     """
-    g_per_r = SHADE_SAND_MIN_G_PER_R if g_per_r is None else g_per_r
-    b_per_r = SHADE_SAND_MIN_B_PER_R if b_per_r is None else b_per_r
-    out = np.zeros(rgb.shape[:2], np.uint8)
+    return _smooth_sand_u8(rgb)[0]
+
+
+def _smooth_sand_u8(rgb: np.ndarray):
+    """(shadowed-sand hue, near-hue band) uint8 0/255 masks of smooth pixels at or below SHADE_SAND_FIRST_ROW:
+    the first passes SHADE_SAND_MIN_*, the second the looser NEAR_SAND_MIN_* (a superset); the texture test
+    is computed once for both."""
     sub = rgb[SHADE_SAND_FIRST_ROW:]
     red = sub[:, :, 0].astype(np.float32)
-    colour = ((red >= SHADE_SAND_MIN_R)
-              & (sub[:, :, 1] >= g_per_r * red)
-              & (sub[:, :, 2] >= b_per_r * red))
     k = (SHADE_SAND_WINDOW_W_PX, SHADE_SAND_WINDOW_H_PX)
     mean = cv2.boxFilter(red, -1, k, borderType=cv2.BORDER_REFLECT)
     mean_sq = cv2.boxFilter(red * red, -1, k, borderType=cv2.BORDER_REFLECT)
-    smooth = (mean_sq - mean * mean) <= SHADE_SAND_MAX_SD ** 2
-    out[SHADE_SAND_FIRST_ROW:] = (colour & smooth).view(np.uint8) * np.uint8(255)
-    return out
+    smooth = ((mean_sq - mean * mean) <= SHADE_SAND_MAX_SD ** 2) & (red >= SHADE_SAND_MIN_R)
+    masks = []
+    for g_per_r, b_per_r in ((SHADE_SAND_MIN_G_PER_R, SHADE_SAND_MIN_B_PER_R),
+                             (NEAR_SAND_MIN_G_PER_R, NEAR_SAND_MIN_B_PER_R)):
+        out = np.zeros(rgb.shape[:2], np.uint8)
+        hue = (sub[:, :, 1] >= g_per_r * red) & (sub[:, :, 2] >= b_per_r * red)
+        out[SHADE_SAND_FIRST_ROW:] = (smooth & hue).view(np.uint8) * np.uint8(255)
+        masks.append(out)
+    return tuple(masks)
 
 
 def rock_mask(rgb: np.ndarray) -> np.ndarray:
@@ -1020,12 +1026,12 @@ def _pixel_labels_opencv(img: np.ndarray):
     """_pixel_labels as a chain of OpenCV/NumPy calls (the reference the kernel is tested against)."""
     nav8 = cv2.inRange(img, NAV_RGB_MIN, (255, 255, 255))
     rock8 = cv2.inRange(img, ROCK_RGB_MIN, ROCK_RGB_MAX)
-    shade8 = cv2.bitwise_and(shadowed_sand_u8(img), cv2.bitwise_not(nav8))
+    sand_hue8, near_hue8 = _smooth_sand_u8(img)
+    shade8 = cv2.bitwise_and(sand_hue8, cv2.bitwise_not(nav8))
     dim8 = cv2.bitwise_and(shade8, cv2.inRange(img, (0, 0, 0), (POCKET_SAND_MIN_R - 1, 255, 255)))
     labels8 = cv2.bitwise_or(nav8, np.bitwise_and(shade8, np.uint8(_SHADE_VALUE)))
     labels8 = cv2.subtract(labels8, np.bitwise_and(dim8, np.uint8(_SHADE_VALUE - _DIM_SHADE_VALUE)))
-    near8 = cv2.bitwise_and(shadowed_sand_u8(img, NEAR_SAND_MIN_G_PER_R, NEAR_SAND_MIN_B_PER_R),
-                            cv2.bitwise_not(cv2.bitwise_or(nav8, shade8)))
+    near8 = cv2.bitwise_and(near_hue8, cv2.bitwise_not(cv2.bitwise_or(nav8, shade8)))
     labels8 = cv2.bitwise_or(labels8, np.bitwise_and(near8, np.uint8(_NEAR_SAND_VALUE)))
     return labels8, nav8, rock8, shade8
 
@@ -1034,7 +1040,7 @@ def _pixel_labels_opencv(img: np.ndarray):
 def _pixel_labels_kernel(img, nav_min, rock_min, rock_max, shade_min_r, pocket_min_r, g_per_r, b_per_r, near_g_per_r,
                          near_b_per_r, max_var, win_w, first_row, shade_value, dim_value, near_value, labels8, nav8,
                          rock8, shade8):
-    """See _pixel_labels.  The texture test is shadowed_sand_u8's: the red mean and mean square over a
+    """See _pixel_labels.  The texture test is _smooth_sand_u8's: the red mean and mean square over a
     win_w x 1 window (reflected at the image edge) as OpenCV's boxFilter computes them for float32
     (exact integer sums, times 1/win_w in float64, rounded to float32), then their float32 variance."""
     h, w = img.shape[0], img.shape[1]
