@@ -236,6 +236,7 @@ class NavMemory:
         self.rock_best_px = 0  # most rock pixels of any camera sighting matched to the target this attempt
         self.rock_backed_off = False  # this attempt already reversed away from the rock once (mode_sample)
         self.rock_back_until = -math.inf  # reversing away from a rock beside the rover until then, s
+        self.turn_sighting = None  # (x, y, t, pixels): a rock the camera showed during a fixed turn (rock_choice.note_turn_sighting)
         self.pickup_sent_at = -math.inf
         self.was_picking = False
         self.last_collect_t = -math.inf  # when the last collection was registered, s
@@ -436,6 +437,7 @@ def _select_and_run(rover, nav, s):
     if s.pos is None:
         return "stop", Command(0.0, BRAKE_STOP if abs(s.vel) > STOPPED_SPEED_MPS else 0.0, 0.0)
     if nav.fixed is not None:
+        rock_choice.note_turn_sighting(nav, s)
         cmd = _fixed_turn_step(nav, s)  # the simulator ignores data commands while it turns: wait for the yaw
         if cmd is not None:
             return "stop", cmd

@@ -25,6 +25,7 @@ COLLECTED_CLEAR_M = 3.0  # remembered rocks this close to a collected one are ec
 ROCK_SKIP_S = 60.0  # a given-up rock is ignored for this long, s
 SAMPLE_VISUAL_M = 3.5  # closer than this the approach steers by the camera, farther it follows a planned path, m
 SAMPLE_VISION_MEMORY_S = 1.0  # keep steering by vision this long after the rock left the frame, s
+TURN_SIGHTING_KEEP_S = 10.0  # a rock the camera showed during a fixed turn is gone back for when the turn (and any turn chained to it) ends within this, s
 
 
 def choose_rock(rover, nav, s):
@@ -32,11 +33,9 @@ def choose_rock(rover, nav, s):
     if s.samples_remaining == 0:
         nav.rock_target = None
         return False
-    yaw = math.radians(s.yaw)
-    if s.rock_angles.size >= ROCK_MIN_PIXELS:
-        dist = float(np.min(s.rock_dists))
-        ang = float(np.mean(s.rock_angles[s.rock_dists <= dist + ROCK_SAME_M / 2]))  # nearest blob only
-        xy = (s.pos[0] + dist * math.cos(yaw + ang), s.pos[1] + dist * math.sin(yaw + ang))
+    sighting = camera_sighting(s)
+    if sighting is not None:
+        xy, dist, ang, pixels = sighting
         same = nav.rock_target is not None and math.hypot(xy[0] - nav.rock_target[0],
                                                           xy[1] - nav.rock_target[1]) < ROCK_SAME_M
         target_d = math.hypot(nav.rock_target[0] - s.pos[0], nav.rock_target[1] - s.pos[1]) \
@@ -45,7 +44,6 @@ def choose_rock(rover, nav, s):
         # the rover is (nearly) at the remembered spot and the camera does not show the rock there:
         # the estimate was off (a far sighting can be 2-3 m out), so trust the rock the camera sees
         lost = target_d <= SAMPLE_VISUAL_M and s.t - nav.rock_seen_time > SAMPLE_VISION_MEMORY_S
-        pixels = int(np.count_nonzero(s.rock_dists <= dist + ROCK_SAME_M / 2))
         if dist <= ROCK_CHASE_M and not _camera_rock_refuted(nav, xy, pixels, dist) \
                 and not _rock_is_known_done(nav, xy, s.t) and (nav.rock_target is None or same or nearer or lost):
             if nav.rock_target is None:
@@ -59,12 +57,16 @@ def choose_rock(rover, nav, s):
             nav.rock_best_px = max(nav.rock_best_px, pixels)
             nav.rock_seen_close |= dist <= SAMPLE_VISUAL_M
             nav.rock_bearing, nav.rock_dist = ang, dist
+            nav.turn_sighting = None
             return True
     if nav.rock_target is not None:
         if _rock_is_known_done(nav, nav.rock_target, s.t):
             nav.rock_target = None
         else:
+            nav.turn_sighting = None
             return True
+    if _go_back_for_turn_sighting(nav, s):
+        return True
     best, best_d = None, math.inf
     for xy in list(getattr(rover, "rocks_world", []) or []):
         try:
@@ -84,6 +86,58 @@ def choose_rock(rover, nav, s):
         nav.rock_seen_time = -math.inf
         return True
     return False
+
+
+def camera_sighting(s):
+    """The nearest rock blob in this frame as (world xy, distance m, bearing rad off the heading,
+    pixels), or None when the camera shows fewer than ROCK_MIN_PIXELS rock pixels."""
+    if s.rock_angles.size < ROCK_MIN_PIXELS:
+        return None
+    dist = float(np.min(s.rock_dists))
+    near = s.rock_dists <= dist + ROCK_SAME_M / 2  # nearest blob only
+    ang = float(np.mean(s.rock_angles[near]))
+    yaw = math.radians(s.yaw)
+    xy = (s.pos[0] + dist * math.cos(yaw + ang), s.pos[1] + dist * math.sin(yaw + ang))
+    return xy, dist, ang, int(np.count_nonzero(near))
+
+
+def note_turn_sighting(nav, s):
+    """During a fixed turn the state machine only waits for the yaw, so a rock that flashes past the
+    camera is not chosen; keep the strongest such sighting (within ROCK_CHASE_M, not collected,
+    skipped or refuted) for _go_back_for_turn_sighting once the turn is over.
+
+    Seed 0 at 10 fps: braking at the north tip, the sample 4.2 m ahead showed 3-4 px (a blob needs 4),
+    then 16 px in the first frame of the 180 deg/s turn back; the rover drove away and the search
+    did not return to the tip before the time limit."""
+    if s.samples_remaining == 0:
+        return
+    sighting = camera_sighting(s)
+    if sighting is None:
+        return
+    xy, dist, _ang, pixels = sighting
+    if dist > ROCK_CHASE_M or _rock_is_known_done(nav, xy, s.t) \
+            or rockmem.nearest_refuted(nav.rock_refuted, xy, ROCK_SAME_M) is not None:
+        return
+    best = nav.turn_sighting
+    if best is None or s.t - best[2] > TURN_SIGHTING_KEEP_S or pixels > best[3]:
+        nav.turn_sighting = (xy[0], xy[1], s.t, pixels)
+
+
+def _go_back_for_turn_sighting(nav, s):
+    """Make a rock seen during a fixed turn that just ended the target (the approach turns back to it
+    and the camera takes over). True if it did."""
+    seen = nav.turn_sighting
+    nav.turn_sighting = None
+    if seen is None or s.t - seen[2] > TURN_SIGHTING_KEEP_S or _rock_is_known_done(nav, seen[:2], s.t):
+        return False
+    log.info("rock glimpsed at (%.1f, %.1f) during a turn (%d px): going back for it", seen[0], seen[1], seen[3])
+    _new_rock_attempt(nav)
+    nav.rock_target = (seen[0], seen[1])
+    nav.rock_since = s.t
+    nav.rock_close_since = None
+    nav.rock_seen_time = -math.inf
+    nav.rock_best_px = seen[3]
+    return True
 
 
 def _rock_is_known_done(nav, xy, t):
