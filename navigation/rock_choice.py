@@ -115,8 +115,7 @@ def note_turn_sighting(nav, s):
     if sighting is None:
         return
     xy, dist, _ang, pixels = sighting
-    if dist > ROCK_CHASE_M or _rock_is_known_done(nav, xy, s.t) \
-            or rockmem.nearest_refuted(nav.rock_refuted, xy, ROCK_SAME_M) is not None:
+    if dist > ROCK_CHASE_M or _rock_is_known_done(nav, xy, s.t):  # collected, skipped or refuted
         return
     best = nav.turn_sighting
     if best is None or s.t - best[2] > TURN_SIGHTING_KEEP_S or pixels > best[3]:
