@@ -79,13 +79,19 @@ def choose_rock(rover, nav, s):
         if d < best_d:
             best, best_d = xy, d
     if best is not None and (best_d <= ROCK_DETOUR_M or nav.explored):
-        _new_rock_attempt(nav)
-        nav.rock_target = best
-        nav.rock_since = s.t
-        nav.rock_close_since = None
-        nav.rock_seen_time = -math.inf
+        _target_unseen_rock(nav, s, best)
         return True
     return False
+
+
+def _target_unseen_rock(nav, s, xy):
+    """Start a fresh attempt at a rock the camera does not show now (remembered, or glimpsed in a turn): the
+    approach plans a path there until the camera picks it up."""
+    _new_rock_attempt(nav)
+    nav.rock_target = xy
+    nav.rock_since = s.t
+    nav.rock_close_since = None
+    nav.rock_seen_time = -math.inf
 
 
 def camera_sighting(s):
@@ -130,11 +136,7 @@ def _go_back_for_turn_sighting(nav, s):
     if seen is None or s.t - seen[2] > TURN_SIGHTING_KEEP_S or _rock_is_known_done(nav, seen[:2], s.t):
         return False
     log.info("rock glimpsed at (%.1f, %.1f) during a turn (%d px): going back for it", seen[0], seen[1], seen[3])
-    _new_rock_attempt(nav)
-    nav.rock_target = (seen[0], seen[1])
-    nav.rock_since = s.t
-    nav.rock_close_since = None
-    nav.rock_seen_time = -math.inf
+    _target_unseen_rock(nav, s, (seen[0], seen[1]))
     nav.rock_best_px = seen[3]
     return True
 
