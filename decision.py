@@ -18,7 +18,8 @@ Modes (one handler function each):
 - search:  map complete but samples missing: peek into shadowed floor the
   camera never saw from close (dark pockets hide small samples) and visit
   mapped floor far from the trail (pockets at the arms' tips) and wall feet
-  beside the trail the camera never faced from close (nooks), nearest first,
+  beside the trail the camera never faced from close (nooks), and drive into
+  faint pockets (slots whose shadowed floor was voted wall), nearest first,
   turning to face unsearched wall feet at each goal reached;
 - home:    plan back to the start and stop there;
 - done:    parked at home with everything collected (or time is up).
@@ -28,8 +29,8 @@ re-derived from the map, not from a script.
 
 This module is the state machine: which mode runs, and how each mode drives.
 What to drive to is planned beside it in navigation/: `exploration_plan`
-(frontier goals, faint pockets, when the map is complete), `search_plan` (the
-sample search's goals), `rock_choice` (which rock, and the memory of rocks given
+(frontier goals, when the map is complete), `search_plan` (the sample search's
+goals, faint pockets among them), `rock_choice` (which rock, and the memory of rocks given
 up or refuted) and `paths` (the maps planned on and the path in `nav`). Each
 holds its own tunable constants at its top.
 """
@@ -179,9 +180,8 @@ class NavMemory:
         self.glance_hold_until = -math.inf  # a glance holds the rover still, facing the wall feet, until then, s
         self.glanced = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places a turn in place already glanced at unsearched wall feet
         self.unsearched = None  # unsearched wall feet (explore.unsearched_wall_feet) at the last plan with samples missing, or None
-        self.pockets_open = False  # exploration ran out of ordinary frontier with samples missing: faint pockets are looked into (logged once)
-        self.pocket_tour_end = math.inf  # ...until then (exploration_plan.POCKET_TOUR_S after pockets_open), s
-        self.pocket_goal = None  # bool map of the faint pocket the current frontier goal drives into (explore.enterable_pockets), or None
+        self.pocket_choice = None  # bool map of the faint pocket behind the search's last pocket candidate (search_plan._pocket_goal), or None
+        self.pocket_goal = None  # ...of the one the search's current pocket goal drives into, or None
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
         self.fixed = None  # the fixed_turn.FixedTurn in flight, or None
@@ -584,7 +584,6 @@ def _check_stuck(nav, s):
         if math.hypot(c + 0.5 - s.pos[0], r + 0.5 - s.pos[1]) > 0.7:
             nav.blocked_at[r, c] = s.t
     search_plan.give_up_search_goal_near(nav, s)
-    exploration_plan.give_up_pocket_near(nav, s)
     return True
 
 
@@ -791,12 +790,10 @@ def mode_forward(rover, nav, s):
     if nav.path_goal is not None and nav.path_goal[0] == "frontier" and len(nav.path_xy) >= 2:
         goal_xy = grid.cell_to_world(*nav.path_goal[1])
         if math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < exploration_plan.FRONTIER_REACHED_M:
-            exploration_plan.pocket_done(nav)
             explore.ignore_disc(nav.frontier_ignored, nav.path_goal[1])
             nav.plan_time = -math.inf
         if paths.goal_stalled(nav, s):
             log.info("frontier %s not getting closer: ignoring it", nav.path_goal[1])
-            exploration_plan.pocket_done(nav)
             exploration_plan.give_up_frontier(nav)
             nav.plan_time = -math.inf
         return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
@@ -822,6 +819,8 @@ def mode_search(rover, nav, s):
             return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
         if kind == "look":
             search_plan.leave_look_stand(rover, nav, s, goal, frame_maps)
+        elif kind == "pocket":
+            search_plan.pocket_done(nav, goal)
         else:
             explore.ignore_disc(nav.search_done, goal, search_plan.search_done_radius(kind))
         nav.plan_time = -math.inf

@@ -609,16 +609,16 @@ def nearest_target(targets, pos=None, yaw_deg=None):
     return int(targets[k, 0]), int(targets[k, 1])
 
 
-def nearer_search_goal(peek, far, dist, look=None, pos=None, yaw_deg=None):
-    """("peek" | "search" | "look", cell) for whichever of the best pocket peek, the best far-floor cell
-    and the best stand beside unsearched wall feet is cheapest by search_cost (by path alone without
-    pos / yaw_deg), or None when none exists.
+def nearer_search_goal(peek, far, dist, look=None, pos=None, yaw_deg=None, pocket=None):
+    """("peek" | "search" | "look" | "pocket", cell) for whichever of the best pocket peek, the best far-floor
+    cell, the best stand beside unsearched wall feet and the way into the nearest faint pocket is cheapest
+    by search_cost (by path alone without pos / yaw_deg), or None when none exists.
 
     Both are places a small sample may hide; the search visits them nearest first. Peeks used to
     go first wherever they were: on seed 0 the rover stood 4 m from the unsearched tip of the
     north arm (where the sixth sample lay) and drove 180 m to a peek at the south tip first.
     """
-    options = [(kind, cell) for kind, cell in (("peek", peek), ("search", far), ("look", look))
+    options = [(kind, cell) for kind, cell in (("peek", peek), ("search", far), ("look", look), ("pocket", pocket))
                if cell is not None and np.isfinite(dist[cell])]
     if not options:
         return None

@@ -132,7 +132,7 @@ def reset_goal_progress(nav, s):
 
 def goal_cell_near(nav, s, kinds, radius_m):
     """The current path goal's cell when the goal is of one of `kinds`, has a cell and lies within radius_m
-    of the rover; else None (the give-up-where-stuck rules of the search and the pocket tour)."""
+    of the rover; else None (the search's give-up-where-stuck rule)."""
     if nav.path_goal is None or nav.path_goal[0] not in kinds or nav.path_goal[1] is None:
         return None
     gx, gy = grid.cell_to_world(*nav.path_goal[1])

@@ -1,8 +1,9 @@
 """The sample search's planning: which place to visit next once the map is complete and samples are missing.
 
-Three kinds of goal compete, nearest by path first (explore.nearer_search_goal): a peek into shadowed
-floor the camera never saw from close, mapped floor far from the trail, and a stand facing wall feet
-the camera never saw from close (nooks). The search keeps its goal against flip-flops, ticks places off
+Four kinds of goal compete, nearest by path first (explore.nearer_search_goal): a peek into shadowed
+floor the camera never saw from close, mapped floor far from the trail, a stand facing wall feet
+the camera never saw from close (nooks), and the way into a faint pocket (a slot whose floor in deep
+shadow was voted wall). The search keeps its goal against flip-flops, ticks places off
 as searched, and gives up a goal where the rover got stuck. Kept apart from decision.py so the state
 machine there reads as modes; mode_search drives the goals chosen here. Functions take the rover, its
 `nav` memory (decision.NavMemory) and the frame's sanitised inputs `s` (decision.Inputs).
@@ -17,7 +18,7 @@ from navigation import astar, explore, grid, paths
 
 log = logging.getLogger(__name__)
 
-SEARCH_GOAL_KINDS = ("peek", "search", "look")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet
+SEARCH_GOAL_KINDS = ("peek", "search", "look", "pocket")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet, faint pocket
 SEARCH_KEEP_MARGIN_M = 6.0  # a look or far-floor goal still open is kept unless another is this much cheaper (explore.search_cost), m
 SEARCH_COMMIT_M = 3.0  # a search goal still open is kept until the rover has driven this far from where it chose it (a turn away from an arm's tip revealed new wall feet there and the rover turned back, twice: seed 7), m
 SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
@@ -46,7 +47,8 @@ def plan_search(rover, nav, s, frame_maps=None):
                                                                                     nav.look_done, dist,
                                                                                     nav.look_stand_done),
                                                                s.pos, s.yaw),
-                                        s.pos, s.yaw)
+                                        s.pos, s.yaw, _pocket_goal(rover, nav, s, free, obstacle, dist))
+    nav.pocket_goal = nav.pocket_choice if chosen is not None and chosen[0] == "pocket" else None
     chosen = keep_search_goal(nav, s, chosen, dist, free, unsearched)
     kind, goal = chosen if chosen is not None else ("search", None)
     if goal is None:
@@ -107,6 +109,36 @@ def _peek_goal(rover, nav, s, free, dist):
     return explore.choose_target(targets, s.pos, s.yaw, current)
 
 
+def _pocket_goal(rover, nav, s, free, obstacle, dist):
+    """The way into the nearest faint pocket not driven into yet (explore.faint_pockets, enterable_pockets,
+    entered at peek_targets' cell), or None; its cluster is kept in nav.pocket_choice.
+
+    Exploration used to tour these first, for up to 120 s, as soon as it ran out of frontier: on seed 0
+    (shadows on) that tour drove from 13 m beside the east nook to the south arm's pockets and the
+    search began there, 60 m from the nook, where the sixth sample lay (found 170 s later). As one
+    more search goal, nearest first, a pocket waits only for goals that are nearer."""
+    nav.pocket_choice = None
+    pockets = explore.faint_pockets(free, obstacle, perception.sand_share(rover)) & ~nav.pocket_reached
+    unlooked = pockets & ~perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
+    if not unlooked.any():
+        return None
+    clusters = explore.enterable_pockets(pockets, unlooked, free)
+    looked = perception.looked_at_within(rover, explore.PEEK_RANGE_M)
+    targets = explore.peek_targets(free, clusters > 0, looked, nav.pocket_reached, dist)
+    goal = explore.nearest_target(targets, s.pos, s.yaw)
+    if goal is not None:
+        nav.pocket_choice = clusters == clusters[goal]
+    return goal
+
+
+def pocket_done(nav, goal):
+    """The faint pocket of the search's pocket goal (reached or given up) is not gone into again."""
+    if nav.pocket_goal is not None:
+        nav.pocket_reached |= nav.pocket_goal
+    explore.ignore_disc(nav.pocket_reached, goal)
+    nav.pocket_goal = None
+
+
 def unsearched_wall_feet(rover, nav, frame_maps, free, obstacle):
     """explore.unsearched_wall_feet, computed once per frame: a search replan and the face turn at a
     reached goal can both ask in the same frame, from the same drive map and look map. ``frame_maps``
@@ -151,5 +183,8 @@ def give_up_search_goal_near(nav, s):
     if goal is None:
         return
     kind = nav.path_goal[0]
-    explore.ignore_disc(nav.look_done if kind == "look" else nav.search_done, goal, search_done_radius(kind))
+    if kind == "pocket":
+        pocket_done(nav, goal)  # many are a shaded slope, not a slot (seed 17, shadows on: 40 s stuck on one)
+    else:
+        explore.ignore_disc(nav.look_done if kind == "look" else nav.search_done, goal, search_done_radius(kind))
     nav.path_goal = None

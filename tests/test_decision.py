@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import decision
-from navigation import exploration_plan, paths, search_plan
+from navigation import exploration_plan, explore, paths, search_plan
 from rover_state import RoverState
 
 DT = 0.04  # twin telemetry period, s
@@ -607,55 +607,53 @@ def _rover_beside_a_faint_slot():
     return r
 
 
-def test_faint_pockets_are_driven_into_only_once_exploration_ran_out_of_frontier():
-    """Seed 3 (shadows on): pockets counted as unsearched from the start moved glances while exploring
-    and cost 49 s with all six found anyway; seeds 14 and 17 need them only once the map is done."""
+def _search_left_with_only_the_slot():
+    """The faint-slot rover once the map is complete: floor far from the trail and every stand done."""
     r = _rover_beside_a_faint_slot()
+    r.nav.search_done[:] = True
+    r.nav.look_done[:] = True
+    return r, decision._read_inputs(r)
+
+
+def test_faint_pockets_are_search_goals_not_exploration_goals():
+    """Seed 3 (shadows on): pockets counted as unsearched from the start moved glances while exploring
+    and cost 49 s with all six found anyway; seeds 14 and 17 need them once the map is done. Exploration
+    leaves them to the sample search, which drives in like to any other goal."""
+    r, s = _search_left_with_only_the_slot()
     free, obstacle, _unknown = paths.grids(r)
     assert not search_plan.unsearched_wall_feet(r, r.nav, None, free, obstacle)[71:78, 108:111].any()
-    s = decision._read_inputs(r)
     exploration_plan.plan_explore(r, r.nav, s)
-    assert r.nav.pockets_open and r.nav.pocket_goal is not None, "no frontier left: into the slot"
-    row, col = r.nav.path_goal[1]
+    assert r.nav.path_goal is None, "no frontier left: exploration has nothing to drive to"
+    search_plan.plan_search(r, r.nav, s)
+    kind, (row, col) = r.nav.path_goal
+    assert kind == "pocket" and r.nav.pocket_goal is not None and r.nav.pocket_goal[row, col]
     assert 75 <= row <= 78 and 108 <= col <= 110, "up to 3.5 m into the slot"
-    r.nav.path_xy = np.array([(112.0, 85.0), (col + 0.5, row + 0.5)])
-    exploration_plan.pocket_done(r.nav)  # driven into; then the second sweep reopens ordinary frontier
-    r.nav.frontier_ignored[:] = False
-    exploration_plan.plan_explore(r, r.nav, s)
-    assert r.nav.path_goal is None and r.nav.pocket_goal is None, "a pocket driven into is not chased again"
-    r2 = _rover_beside_a_faint_slot()
-    r2.samples_remaining = 0
-    exploration_plan.plan_explore(r2, r2.nav, decision._read_inputs(r2))
-    assert r2.nav.path_goal is None and not r2.nav.pockets_open, "all six in: no pocket is worth a look"
+    search_plan.pocket_done(r.nav, (row, col))  # driven into
+    search_plan.plan_search(r, r.nav, s)
+    assert r.nav.path_goal is None and not r.nav.search_left, "a pocket driven into is not chased again"
 
 
-def test_the_faint_pocket_tour_ends_after_its_time_budget():
-    """A sample in no pocket waited for the whole tour: after POCKET_TOUR_S the search takes over."""
-    r = _rover_beside_a_faint_slot()
-    s = decision._read_inputs(r)
-    r.nav.pockets_open, r.nav.pocket_tour_end = True, s.t + 1.0  # the tour began POCKET_TOUR_S - 1 s ago
-    exploration_plan.plan_explore(r, r.nav, s)
-    assert r.nav.pocket_goal is not None, "still within the budget: into the slot"
-    s.t = r.nav.pocket_tour_end + 0.5
-    exploration_plan.plan_explore(r, r.nav, s)
-    assert r.nav.path_goal is None and r.nav.pocket_goal is None, "budget spent: no pocket chased"
-    r2 = _rover_beside_a_faint_slot()
-    s2 = decision._read_inputs(r2)
-    exploration_plan.plan_explore(r2, r2.nav, s2)
-    assert r2.nav.pocket_tour_end == pytest.approx(s2.t + exploration_plan.POCKET_TOUR_S), \
-        "the budget starts with the tour"
+def test_a_nearer_search_goal_comes_before_a_faint_pocket():
+    """Seed 0 (shadows on): exploration toured pockets first and drove from 13 m beside the east nook to
+    the south arm's pockets; the sixth sample, in the nook, was found 170 s later. Nearest goal first."""
+    dist = np.full((200, 200), np.inf)
+    dist[85, 100], dist[60, 100] = 10.0, 40.0
+    look, pocket = (85, 100), (60, 100)
+    assert explore.nearer_search_goal(None, None, dist, look, pocket=pocket) == ("look", look)
+    dist[85, 100] = 50.0
+    assert explore.nearer_search_goal(None, None, dist, look, pocket=pocket) == ("pocket", pocket)
 
 
 def test_a_faint_pocket_the_rover_got_stuck_in_is_done():
     """Seed 17 (shadows on): the rover spent 40 s stuck on a shaded slope it took for a pocket."""
-    r = _rover_beside_a_faint_slot()
-    s = decision._read_inputs(r)
-    exploration_plan.plan_explore(r, r.nav, s)
-    row, col = r.nav.path_goal[1]
+    r, s = _search_left_with_only_the_slot()
+    search_plan.plan_search(r, r.nav, s)
+    kind, (row, col) = r.nav.path_goal
+    assert kind == "pocket"
     s.pos = (col + 0.5, row + 3.5)  # 3 m short of it, wedged
-    exploration_plan.give_up_pocket_near(r.nav, s)
+    search_plan.give_up_search_goal_near(r.nav, s)
     assert r.nav.pocket_reached[row, col] and r.nav.path_goal is None
-    exploration_plan.plan_explore(r, r.nav, s)
+    search_plan.plan_search(r, r.nav, s)
     assert r.nav.path_goal is None, "not chased again"
 
 

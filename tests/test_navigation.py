@@ -307,7 +307,7 @@ def test_faint_pockets_finds_a_slot_of_weak_sand_but_not_a_fuzzy_edge():
 
 
 def _pocket_entries(pockets, unlooked, free, looked, done, dist):
-    """(targets, clusters) as exploration_plan._pocket_targets gets them for one cost grid."""
+    """(targets, clusters) as search_plan._pocket_goal gets them."""
     clusters = explore.enterable_pockets(pockets, unlooked, free)
     return explore.peek_targets(free, clusters > 0, looked, done, dist), clusters
 
