@@ -21,6 +21,8 @@ log = logging.getLogger(__name__)
 SEARCH_GOAL_KINDS = ("peek", "search", "look", "pocket")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet, faint pocket
 SEARCH_KEEP_MARGIN_M = 6.0  # a look or far-floor goal still open is kept unless another is this much cheaper (explore.search_cost), m
 SEARCH_COMMIT_M = 3.0  # a search goal still open is kept until the rover has driven this far from where it chose it (a turn away from an arm's tip revealed new wall feet there and the rover turned back, twice: seed 7), m
+SEARCH_LOCAL_M = 15.0  # while pockets come first (SEARCH_POCKETS_FIRST_S), goals this close (straight line) to where the search began come before them: finishing where the rover stands costs less than coming back, m
+SEARCH_POCKETS_FIRST_S = 120.0  # for this long after the search began, faint pockets come before every goal but those near its start (about the tour exploration once made), s
 SEARCH_STUCK_GIVE_UP_M = 5.0  # a search / peek target this close to where the rover got stuck is given up, m
 
 
@@ -30,8 +32,8 @@ def samples_missing(s):
 
 
 def plan_search(rover, nav, s, frame_maps=None):
-    """Set nav's path to the nearest open search goal (peek, far floor or look stand); when none is left,
-    clear nav.search_left. ``frame_maps`` shares per-frame maps with the face turn (unsearched_wall_feet)."""
+    """Set nav's path to the nearest open search goal (peek, far floor, look stand or faint pocket; for a
+    while pockets first, see _search_tier); when none is left, clear nav.search_left. ``frame_maps`` shares per-frame maps with the face turn (unsearched_wall_feet)."""
     free, obstacle, _unknown = paths.grids(rover)
     cost = grid.cost_grid(free, obstacle, paths.blocked_cells(nav, s), allow_unknown=False, soft_obstacles=True,
                           rough=paths.roughness(rover))
@@ -40,16 +42,18 @@ def plan_search(rover, nav, s, frame_maps=None):
     dist, parent = astar.distance_field(cost, cell)
     unsearched = remember_unsearched(rover, nav, s, free, obstacle, frame_maps)
     visited = nav.visits.visited()
-    chosen = explore.nearer_search_goal(_peek_goal(rover, nav, s, free, dist),
-                                        explore.search_target(free, visited, nav.search_done, dist, s.pos, s.yaw),
-                                        dist,
-                                        explore.nearest_target(explore.look_targets(unsearched, free, visited,
-                                                                                    nav.look_done, dist,
-                                                                                    nav.look_stand_done),
-                                                               s.pos, s.yaw),
-                                        s.pos, s.yaw, _pocket_goal(rover, nav, s, free, obstacle, dist))
+    if nav.search_began is None:
+        nav.search_began = (s.t, s.pos)
+    candidates = {"peek": _peek_goal(rover, nav, s, free, dist),
+                  "search": explore.search_target(free, visited, nav.search_done, dist, s.pos, s.yaw),
+                  "look": explore.nearest_target(explore.look_targets(unsearched, free, visited, nav.look_done, dist,
+                                                                      nav.look_stand_done), s.pos, s.yaw),
+                  "pocket": _pocket_goal(rover, nav, s, free, obstacle, dist)}
+    chosen = _tiered_goal(nav, s, dist, candidates)
     nav.pocket_goal = nav.pocket_choice if chosen is not None and chosen[0] == "pocket" else None
-    chosen = keep_search_goal(nav, s, chosen, dist, free, unsearched)
+    cur = nav.path_goal
+    if chosen is None or cur is None or cur[1] is None or _search_tier(nav, s, *cur) <= _search_tier(nav, s, *chosen):
+        chosen = keep_search_goal(nav, s, chosen, dist, free, unsearched)
     kind, goal = chosen if chosen is not None else ("search", None)
     if goal is None:
         nav.search_left = False
@@ -109,14 +113,40 @@ def _peek_goal(rover, nav, s, free, dist):
     return explore.choose_target(targets, s.pos, s.yaw, current)
 
 
+def _tiered_goal(nav, s, dist, candidates):
+    """The cheapest (explore.nearer_search_goal) of the `candidates` {kind: cell or None} in the best
+    _search_tier that has any, or None."""
+    for tier in range(3):
+        pick = {k: c if c is not None and _search_tier(nav, s, k, c) == tier else None for k, c in candidates.items()}
+        chosen = explore.nearer_search_goal(pick["peek"], pick["search"], dist, pick["look"], s.pos, s.yaw,
+                                            pick["pocket"])
+        if chosen is not None:
+            return chosen
+    return None
+
+
+def _search_tier(nav, s, kind, cell):
+    """Rank of a search goal while pockets come first: 0 near where the search began (SEARCH_LOCAL_M), 1 a faint
+    pocket, 2 the rest; 0 for all once SEARCH_POCKETS_FIRST_S has passed (nearest first from then on).
+
+    Exploration used to tour the pockets first, for up to 120 s, as soon as it ran out of frontier: on
+    seed 0 (shadows on) the tour drove from 13 m beside the east nook to the south arm's pockets, and the
+    search found the nook's sample 170 s later. Nearest first, with the pockets as one more goal, lost
+    seed 17 (shadows on): its sample was in the hub's south-west pocket, 75 m off, reached at 792 s.
+    Finishing the place the rover stands in costs a few look stands; coming back to it, a crossing."""
+    if cell is None or nav.search_began is None or s.t - nav.search_began[0] > SEARCH_POCKETS_FIRST_S:
+        return 0
+    if kind == "pocket":
+        return 1
+    (x0, y0), (row, col) = nav.search_began[1], cell
+    return 0 if math.hypot(col + 0.5 - x0, row + 0.5 - y0) <= SEARCH_LOCAL_M else 2
+
+
 def _pocket_goal(rover, nav, s, free, obstacle, dist):
     """The way into the nearest faint pocket not driven into yet (explore.faint_pockets, enterable_pockets,
     entered at peek_targets' cell), or None; its cluster is kept in nav.pocket_choice.
 
-    Exploration used to tour these first, for up to 120 s, as soon as it ran out of frontier: on seed 0
-    (shadows on) that tour drove from 13 m beside the east nook to the south arm's pockets and the
-    search began there, 60 m from the nook, where the sixth sample lay (found 170 s later). As one
-    more search goal, nearest first, a pocket waits only for goals that are nearer."""
+    They come before most other goals for a while (_search_tier)."""
     nav.pocket_choice = None
     pockets = explore.faint_pockets(free, obstacle, perception.sand_share(rover)) & ~nav.pocket_reached
     unlooked = pockets & ~perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
