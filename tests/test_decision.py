@@ -644,6 +644,28 @@ def test_a_nearer_search_goal_comes_before_a_faint_pocket():
     assert explore.nearer_search_goal(None, None, dist, look, pocket=pocket) == ("pocket", pocket)
 
 
+def test_the_search_finishes_where_it_began_then_looks_into_faint_pockets_then_goes_nearest_first():
+    """Seed 0 (shadows on): exploration's pocket tour drove from 13 m beside the east nook to the south arm's
+    pockets; the nook's sample was found 170 s later. Seed 17 (shadows on): nearest first without the
+    pockets' turn reached the south spur's pocket, and its sample, at 792 s."""
+    from types import SimpleNamespace
+    nav = SimpleNamespace(search_began=(400.0, (100.5, 100.5)))
+    s = SimpleNamespace(t=410.0, pos=(100.5, 100.5), yaw=0.0)
+    dist = np.full((200, 200), np.inf)
+    near_look, far_look, pocket = (100, 110), (100, 125), (40, 100)  # 9.5 m and 24.5 m from the start; pocket 60 m
+    dist[near_look], dist[far_look], dist[pocket] = 10.0, 25.0, 70.0
+    goals = {"peek": None, "search": None, "look": near_look, "pocket": pocket}
+    assert search_plan._tiered_goal(nav, s, dist, goals) == ("look", near_look), "near the start: first"
+    goals["look"] = far_look
+    assert search_plan._tiered_goal(nav, s, dist, goals) == ("pocket", pocket), "then the pockets, before the rest"
+    s.t = 400.0 + search_plan.SEARCH_POCKETS_FIRST_S + 1.0
+    assert search_plan._tiered_goal(nav, s, dist, goals) == ("look", far_look), "then nearest first"
+    goals["look"] = None
+    assert search_plan._tiered_goal(nav, s, dist, goals) == ("pocket", pocket)
+    goals["pocket"] = None
+    assert search_plan._tiered_goal(nav, s, dist, goals) is None
+
+
 def test_a_faint_pocket_the_rover_got_stuck_in_is_done():
     """Seed 17 (shadows on): the rover spent 40 s stuck on a shaded slope it took for a pocket."""
     r, s = _search_left_with_only_the_slot()
