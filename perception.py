@@ -110,6 +110,7 @@ SCORED_CELL_W_FLOOR_NE = 0.08  # logit per unit of floor toward the north-east (
 SCORED_CELL_BIAS = -5.98  # logit of a cell with no sand and no floor around it
 SCORED_CELL_MIN_P = 0.400  # a seen cell is navigable on the scored map when the model's probability exceeds this, 0..1
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
+NO_VOTE_MODES = ("stuck",)  # decision modes (rover.mode, from the last frame) whose frames do not vote: a rover wedged against a rock sees its face, which the flat-floor projection paints as wall over the floor behind it
 LOOK_RANGE_MAX_M = 4.0  # the closest-look map (how near the camera has seen each cell) records looks up to this, m
 LOOK_HALF_ANGLE_DEG = 40.0  # ...and only this far off the rover's heading, deg (a sample at the image's side edge is cut off or a few px; seed 0 passed the east-nook rock 50-80 deg off-axis and called it searched)
 
@@ -1137,6 +1138,7 @@ def perception_step(rover):
     pos = getattr(rover, "pos", (np.nan, np.nan))
     pose_ok = pos is not None and len(pos) == 2 and _finite(pos[0]) and _finite(pos[1]) and _finite(rover.yaw)
     level = abs(pitch) <= TILT_GATE_DEG and abs(roll) <= TILT_GATE_DEG
+    level = level and getattr(rover, "mode", None) not in NO_VOTE_MODES
 
     window = None
     if pose_ok and level:
