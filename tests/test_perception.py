@@ -171,6 +171,19 @@ def test_tilt_gate_skips_map_update_but_keeps_decision_outputs():
     assert not r.map_updated
 
 
+def test_a_stuck_rover_does_not_vote_but_still_sees():
+    """Seed 12 (shadows on): 30 s of stuck recovery beside two small rocks painted their faces as wall over the
+    floor behind them (24,000 wall votes on one true floor cell); the stuck frames now leave the map alone."""
+    r = _rover(_synthetic())
+    r.mode = "stuck"
+    r = P.perception_step(r)
+    assert not r.map_updated and not r.worldmap.any()
+    assert r.nav_angles.size > 0, "decision still gets this frame's view"
+    r.mode = "forward"
+    r = P.perception_step(r)
+    assert r.map_updated and r.worldmap[:, :, 2].any()
+
+
 def test_bad_inputs_do_not_crash():
     r = RoverState()
     assert P.perception_step(r) is r  # no image yet
