@@ -385,7 +385,7 @@ class PerceptionMemory:
 
     nav_votes, obs_votes: float32 (200, 200) [y, x]; distance-weighted counts of
         0.1 m top-down cells that looked navigable / obstacle in a cell. Votes only
-        come from level frames (TILT_GATE_DEG) and ground within MAP_RANGE_M.
+        come from level frames (TILT_GATE_DEG) taken outside NO_VOTE_MODES, and ground within MAP_RANGE_M.
     rock_clusters: list of [sum_w*x, sum_w*y, sum_w, hits] per remembered sample rock.
     frames_seen, frames_mapped: counters (mapped = passed the tilt gate).
     shade_votes: float32 (200, 200); the part of obs_votes that was sand in shadow at least
@@ -1138,10 +1138,10 @@ def perception_step(rover):
     pos = getattr(rover, "pos", (np.nan, np.nan))
     pose_ok = pos is not None and len(pos) == 2 and _finite(pos[0]) and _finite(pos[1]) and _finite(rover.yaw)
     level = abs(pitch) <= TILT_GATE_DEG and abs(roll) <= TILT_GATE_DEG
-    level = level and getattr(rover, "mode", None) not in NO_VOTE_MODES
+    votes = level and getattr(rover, "mode", None) not in NO_VOTE_MODES
 
     window = None
-    if pose_ok and level:
+    if pose_ok and votes:
         window = _vote(mem, grid, float(pos[0]), float(pos[1]), float(rover.yaw))
         mem.frames_mapped += 1
         rover.map_updated = True
