@@ -181,8 +181,7 @@ class NavMemory:
         self.glanced = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # places a turn in place already glanced at unsearched wall feet
         self.unsearched = None  # unsearched wall feet (explore.unsearched_wall_feet) at the last plan with samples missing, or None
         self.search_began = None  # (t, (x, y)) when and where the sample search first planned, or None
-        self.pocket_choice = None  # bool map of the faint pocket behind the search's last pocket candidate (search_plan._pocket_goal), or None
-        self.pocket_goal = None  # ...of the one the search's current pocket goal drives into, or None
+        self.pocket_goal = None  # bool map of the faint pocket the search's current pocket goal drives into (search_plan._pocket_goal), or None
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
         self.fixed = None  # the fixed_turn.FixedTurn in flight, or None

@@ -387,7 +387,7 @@ class PerceptionMemory:
         0.1 m top-down cells that looked navigable / obstacle in a cell. Votes only
         come from level frames (TILT_GATE_DEG) taken outside NO_VOTE_MODES, and ground within MAP_RANGE_M.
     rock_clusters: list of [sum_w*x, sum_w*y, sum_w, hits] per remembered sample rock.
-    frames_seen, frames_mapped: counters (mapped = passed the tilt gate).
+    frames_seen, frames_mapped: counters (mapped = passed the tilt gate, outside NO_VOTE_MODES).
     shade_votes: float32 (200, 200); the part of obs_votes that was sand in shadow at least
         POCKET_SAND_MIN_R red.  The scored ``rover.worldmap`` counts it as navigable, the
         drive map as obstacle; :func:`pocket_floor` counts it too.

@@ -47,13 +47,13 @@ def plan_search(rover, nav, s, frame_maps=None):
     candidates = {"peek": _peek_goal(rover, nav, s, free, dist),
                   "search": explore.search_target(free, visited, nav.search_done, dist, s.pos, s.yaw),
                   "look": explore.nearest_target(explore.look_targets(unsearched, free, visited, nav.look_done, dist,
-                                                                      nav.look_stand_done), s.pos, s.yaw),
-                  "pocket": _pocket_goal(rover, nav, s, free, obstacle, dist)}
+                                                                      nav.look_stand_done), s.pos, s.yaw)}
+    candidates["pocket"], pocket_cluster = _pocket_goal(rover, nav, s, free, obstacle, dist)
     chosen = _tiered_goal(nav, s, dist, candidates)
-    nav.pocket_goal = nav.pocket_choice if chosen is not None and chosen[0] == "pocket" else None
     cur = nav.path_goal
     if chosen is None or cur is None or cur[1] is None or _search_tier(nav, s, *cur) <= _search_tier(nav, s, *chosen):
         chosen = keep_search_goal(nav, s, chosen, dist, free, unsearched)
+    nav.pocket_goal = pocket_cluster if chosen is not None and chosen[0] == "pocket" else None
     kind, goal = chosen if chosen is not None else ("search", None)
     if goal is None:
         nav.search_left = False
@@ -116,8 +116,9 @@ def _peek_goal(rover, nav, s, free, dist):
 def _tiered_goal(nav, s, dist, candidates):
     """The cheapest (explore.nearer_search_goal) of the `candidates` {kind: cell or None} in the best
     _search_tier that has any, or None."""
+    tiers = {k: _search_tier(nav, s, k, c) for k, c in candidates.items()}
     for tier in range(3):
-        pick = {k: c if c is not None and _search_tier(nav, s, k, c) == tier else None for k, c in candidates.items()}
+        pick = {k: c if c is not None and tiers[k] == tier else None for k, c in candidates.items()}
         chosen = explore.nearer_search_goal(pick["peek"], pick["search"], dist, pick["look"], s.pos, s.yaw,
                                             pick["pocket"])
         if chosen is not None:
@@ -143,22 +144,19 @@ def _search_tier(nav, s, kind, cell):
 
 
 def _pocket_goal(rover, nav, s, free, obstacle, dist):
-    """The way into the nearest faint pocket not driven into yet (explore.faint_pockets, enterable_pockets,
-    entered at peek_targets' cell), or None; its cluster is kept in nav.pocket_choice.
+    """(cell, cluster): the way into the nearest faint pocket not driven into yet (explore.faint_pockets,
+    enterable_pockets, entered at peek_targets' cell) and the pocket's bool map, or (None, None).
 
     They come before most other goals for a while (_search_tier)."""
-    nav.pocket_choice = None
     pockets = explore.faint_pockets(free, obstacle, perception.sand_share(rover)) & ~nav.pocket_reached
     unlooked = pockets & ~perception.looked_at_within(rover, explore.SEARCH_LOOK_M)
     if not unlooked.any():
-        return None
+        return None, None
     clusters = explore.enterable_pockets(pockets, unlooked, free)
     looked = perception.looked_at_within(rover, explore.PEEK_RANGE_M)
     targets = explore.peek_targets(free, clusters > 0, looked, nav.pocket_reached, dist)
     goal = explore.nearest_target(targets, s.pos, s.yaw)
-    if goal is not None:
-        nav.pocket_choice = clusters == clusters[goal]
-    return goal
+    return (goal, clusters == clusters[goal]) if goal is not None else (None, None)
 
 
 def pocket_done(nav, goal):
