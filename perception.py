@@ -100,17 +100,21 @@ MIN_CELL_VOTES = 3.0  # weighted votes a cell needs before it is shown at all
 # map_bw: a rim cell is part sand and part wall, and whether its centre is floor shows in its shares and in how
 # much floor surrounds it together, not in either alone.  Fitted by `python -m evaluation.fit_scored_cells` on
 # megalphian, test_dataset and twin missions (seeds 0-3 shadows off, 0-2 on); checked on the other drives (round 10:
-# the floor-side term; the canyon is lit from one side, so which side of a rim cell the floor lies on matters).
-SCORED_CELL_W_LIGHT = 4.49  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
-SCORED_CELL_W_SAND = 4.37  # logit per unit of light plus shadowed sand share
-SCORED_CELL_W_SHADE = 4.37  # logit per unit of shadowed sand share (both shades)
-SCORED_CELL_W_NEAR = 4.20  # logit per unit of near-hue sand share (NEAR_SAND_MIN_*)
-SCORED_CELL_W_NEIGHBOUR = 0.45  # logit per neighbour (of 8) the vote-share rules call navigable
-SCORED_CELL_W_FLOOR_NE = 0.08  # logit per unit of floor toward the north-east (neighbours' east + north offsets, -6..6)
-SCORED_CELL_BIAS = -5.98  # logit of a cell with no sand and no floor around it
+# the floor-side term; the canyon is lit from one side, so which side of a rim cell the floor lies on matters;
+# round 14: refitted on votes that weigh hidden ground down, OCCLUDED_VOTE_WEIGHT).
+SCORED_CELL_W_LIGHT = 4.563  # logit per unit of light-sand share (band mean, or the plain share where no band speaks)
+SCORED_CELL_W_SAND = 4.692  # logit per unit of light plus shadowed sand share
+SCORED_CELL_W_SHADE = 4.372  # logit per unit of shadowed sand share (both shades)
+SCORED_CELL_W_NEAR = 4.812  # logit per unit of near-hue sand share (NEAR_SAND_MIN_*)
+SCORED_CELL_W_NEIGHBOUR = 0.381  # logit per neighbour (of 8) the vote-share rules call navigable
+SCORED_CELL_W_FLOOR_NE = 0.086  # logit per unit of floor toward the north-east (neighbours' east + north offsets, -6..6)
+SCORED_CELL_BIAS = -6.227  # logit of a cell with no sand and no floor around it
 SCORED_CELL_MIN_P = 0.400  # a seen cell is navigable on the scored map when the model's probability exceeds this, 0..1
 TILT_GATE_DEG = 3.0  # skip map votes when |pitch| or |roll| exceeds this, deg
 NO_VOTE_MODES = ("stuck",)  # decision modes (rover.mode, from the last frame) whose frames do not vote: a rover wedged against a rock sees its face, which the flat-floor projection paints as wall over the floor behind it
+OCCLUDED_VOTE_WEIGHT = 0.3  # weight of a vote from ground behind the first rock or wall face a pixel column meets (the flat-floor projection paints that face over it), 0..1
+VIEW_FOOT_RUN_PX = 3  # a column's view of the floor ends at its lowest run of this many non-sand pixels (that face's foot), px
+VIEW_FOOT_MARGIN_M = 1.0  # ground up to this far beyond the foot still counts as seen (the foot's own cell, a wall's rim), m
 LOOK_RANGE_MAX_M = 4.0  # the closest-look map (how near the camera has seen each cell) records looks up to this, m
 LOOK_HALF_ANGLE_DEG = 40.0  # ...and only this far off the rover's heading, deg (a sample at the image's side edge is cut off or a few px; seed 0 passed the east-nook rock 50-80 deg off-axis and called it searched)
 
@@ -385,7 +389,9 @@ class PerceptionMemory:
 
     nav_votes, obs_votes: float32 (200, 200) [y, x]; distance-weighted counts of
         0.1 m top-down cells that looked navigable / obstacle in a cell. Votes only
-        come from level frames (TILT_GATE_DEG) taken outside NO_VOTE_MODES, and ground within MAP_RANGE_M.
+        come from level frames (TILT_GATE_DEG) taken outside NO_VOTE_MODES, and ground within MAP_RANGE_M;
+        a vote from ground the camera could not see (behind a face's foot, :func:`_occluded_grid`) counts
+        OCCLUDED_VOTE_WEIGHT of one.
     rock_clusters: list of [sum_w*x, sum_w*y, sum_w, hits] per remembered sample rock.
     frames_seen, frames_mapped: counters (mapped = passed the tilt gate, outside NO_VOTE_MODES).
     shade_votes: float32 (200, 200); the part of obs_votes that was sand in shadow at least
@@ -403,6 +409,7 @@ class PerceptionMemory:
     last_grid: uint8 top-down label grid of the last frame (0 unknown, 1 obstacle, 2 navigable,
         3 sand in shadow, 4 darker sand in shadow, 5 near-hue sand),
         rows = forward distance (row i at (i + 0.5) * GRID_RES_M), cols = lateral (left at high j).
+    last_occluded: uint8 grid of the same shape, 1 where the last frame's ground was hidden (:func:`_occluded_grid`).
     """
     nav_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
     obs_votes: np.ndarray = field(default_factory=lambda: np.zeros((WORLD_SIZE, WORLD_SIZE), np.float32))
@@ -417,6 +424,7 @@ class PerceptionMemory:
     frames_seen: int = 0
     frames_mapped: int = 0
     last_grid: Optional[np.ndarray] = None
+    last_occluded: Optional[np.ndarray] = None
     worldmap: Optional[np.ndarray] = None  # the array last handed out as rover.worldmap
     drive_worldmap: Optional[np.ndarray] = None  # same layout, shadowed sand as obstacle (see drive_map)
     drawn_rocks: List[Tuple[float, float]] = field(default_factory=list)
@@ -808,6 +816,40 @@ def _warp_labels(nav8: np.ndarray, pitch_deg: float, roll_deg: float) -> np.ndar
     return cv2.bitwise_and(cv2.LUT(warped, _GRID_LUT), _GRID_USABLE_U8)
 
 
+def _column_feet(labels8: np.ndarray):
+    """Per image column: (has a foot, the level camera's range to it in m).
+
+    The foot is the bottom pixel of the column's lowest run of VIEW_FOOT_RUN_PX non-sand pixels
+    (labels8 == 0): where the first rock or wall face the column meets stands on the floor."""
+    blocked = (labels8 == 0).view(np.uint8)
+    run = cv2.erode(blocked, np.ones((VIEW_FOOT_RUN_PX, 1), np.uint8), anchor=(0, 0),
+                    borderType=cv2.BORDER_CONSTANT, borderValue=0)  # 1 where this and the next rows down are blocked
+    has_run = run.any(axis=0)
+    foot = IMAGE_H - 1 - np.argmax(run[::-1], axis=0) + VIEW_FOOT_RUN_PX - 1
+    below = foot + 0.5 - CY  # rows below the horizon
+    has_foot = has_run & (below > 0)
+    return has_foot, FOCAL_PX * CAMERA_HEIGHT_M / np.where(has_foot, below, 1.0)
+
+
+def _occluded_grid(labels8: np.ndarray, pitch_deg: float, roll_deg: float) -> np.ndarray:
+    """uint8 top-down grid, 1 where this frame's ground was hidden from the camera.
+
+    The camera is 0.21 m above the floor, so the flat-floor projection paints any rock or wall face
+    taller than that over all the ground behind it, out to the map range: a rock in the hub cast
+    a wedge of wall votes over true floor from every side it was seen from (seed 12, shadows on).
+    Ground more than VIEW_FOOT_MARGIN_M beyond a column's foot is hidden; its votes, floor and wall
+    alike, count OCCLUDED_VOTE_WEIGHT of one, so the views that did see it decide.  Rows are cut
+    at the level camera's range (like _column_feet); the warp then applies the frame's tilt."""
+    has_foot, foot_m = _column_feet(labels8)
+    fh = FOCAL_PX * CAMERA_HEIGHT_M
+    cut = np.where(has_foot, CY - 0.5 + fh / (foot_m + VIEW_FOOT_MARGIN_M), -np.inf)  # first row still seen
+    hidden = (np.arange(IMAGE_H, dtype=np.float64)[:, None] < cut[None, :]).view(np.uint8)
+    h = _LEVEL_H if (pitch_deg == 0.0 and roll_deg == 0.0) else ground_homography(pitch_deg, roll_deg)
+    warped = cv2.warpPerspective(hidden, h, (_GRID_COLS, _GRID_ROWS), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return cv2.bitwise_and(warped, _GRID_USABLE_U8)  # ground behind the camera projects upside down: not in view
+
+
 def _rock_detections(rock8: np.ndarray, pitch_deg, roll_deg):
     """Per gold blob: rover-frame floor point under its nearest (bottom) pixel, plus per-pixel polar.
 
@@ -899,8 +941,10 @@ def _overlay_u8(rgb: np.ndarray, nav8: np.ndarray, rock8: np.ndarray, shade8: Op
     return cv2.addWeighted(rgb, VISION_BLEND, overlay, 1.0 - VISION_BLEND, 0.0)
 
 
-def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: float):
+def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: float, occluded=None):
     """Add this frame's distance-weighted votes; returns the changed map window (y0, y1, x0, x1).
+    ``occluded`` (uint8 grid like ``grid``, 1 = hidden ground, :func:`_occluded_grid`; None: none hidden)
+    scales those cells' votes by OCCLUDED_VOTE_WEIGHT.
 
     One compiled pass (:func:`_vote_kernel`) instead of a dozen NumPy passes over the ~7000 seen
     cells: the same arithmetic in the same order, so the maps are bit for bit what the NumPy
@@ -908,7 +952,9 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
     """
     a = math.radians(yaw)
     window = np.zeros(4, np.int64)
-    found = _vote_kernel(grid.ravel(), _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST, _MAP_BAND,
+    if occluded is None:
+        occluded = np.zeros(grid.shape, np.uint8)
+    found = _vote_kernel(grid.ravel(), occluded.ravel(), float(OCCLUDED_VOTE_WEIGHT), _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST, _MAP_BAND,
                          float(x), float(y), math.cos(a), math.sin(a), float(NAV_VOTE_WEIGHT),
                          float(OBS_VOTE_WEIGHT), mem.nav_votes, mem.obs_votes, mem.shade_votes,
                          mem.dim_shade_votes, mem.near_sand_votes, mem.look_range, mem.band_nav_votes, mem.band_votes,
@@ -917,11 +963,11 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
 
 
 @njit(cache=True)
-def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, map_band, xpos, ypos, c, s,
+def _vote_kernel(labels, occluded, occluded_weight, cells, map_x, map_y, map_weight, map_look, map_dist, map_band, xpos, ypos, c, s,
                  nav_weight, obs_weight, nav_votes, obs_votes, shade_votes, dim_votes, near_votes, look_range, band_nav,
                  band_all, window):
     """The votes of the grid cells ``cells`` (flat indices into ``labels``) at pose (xpos, ypos, yaw
-    with cos c, sin s); writes (y0, y1, x0, x1) into ``window`` and returns False when no seen
+    with cos c, sin s), those where ``occluded`` is set weighted by ``occluded_weight``; writes (y0, y1, x0, x1) into ``window`` and returns False when no seen
     cell falls on the map.
 
     Module constants are passed in, never read as globals (numba would freeze them at compile
@@ -969,6 +1015,8 @@ def _vote_kernel(labels, cells, map_x, map_y, map_weight, map_look, map_dist, ma
         k = keep[j]
         label = labels[cells[k]]
         w = map_weight[k]
+        if occluded[cells[k]]:
+            w = w * occluded_weight
         cell = (iy[j] - y0) * cols + (ix[j] - x0)
         bcell = map_band[k] * size + cell
         if label == _LABEL_NAV:
@@ -1142,7 +1190,8 @@ def perception_step(rover):
 
     window = None
     if pose_ok and votes:
-        window = _vote(mem, grid, float(pos[0]), float(pos[1]), float(rover.yaw))
+        mem.last_occluded = _occluded_grid(labels8, pitch, roll)
+        window = _vote(mem, grid, float(pos[0]), float(pos[1]), float(rover.yaw), mem.last_occluded)
         mem.frames_mapped += 1
         rover.map_updated = True
 

@@ -79,6 +79,7 @@ class VoteLog:
 def _frame_votes(mem, x: float, y: float, yaw: float):
     """The cells, range bands, weights, labels and near flags ``perception._vote`` used for the last frame."""
     labels = mem.last_grid.ravel()[perception._MAP_CELLS]
+    hidden = mem.last_occluded.ravel()[perception._MAP_CELLS] != 0
     idx = np.flatnonzero(labels != perception._LABEL_UNKNOWN)
     xw, yw = perception.rover_to_world(perception._MAP_X[idx], perception._MAP_Y[idx], x, y, yaw)
     ix, iy = np.floor(xw).astype(np.int64), np.floor(yw).astype(np.int64)
@@ -87,7 +88,8 @@ def _frame_votes(mem, x: float, y: float, yaw: float):
     idx = idx[ok]
     band = np.clip(np.digitize(perception._MAP_DIST[idx], RANGE_BANDS_M) - 1, 0, len(RANGE_BANDS_M) - 2)
     near = perception._MAP_DIST[idx] < NEAR_CONFIRM_RANGE_M
-    return iy[ok] * n + ix[ok], band, perception._MAP_WEIGHT[idx], labels[idx], near
+    weight = np.where(hidden[idx], perception._MAP_WEIGHT[idx] * perception.OCCLUDED_VOTE_WEIGHT, perception._MAP_WEIGHT[idx])
+    return iy[ok] * n + ix[ok], band, weight, labels[idx], near
 
 
 def collect(log_path, ground_truth=None, progress: bool = False) -> VoteLog:

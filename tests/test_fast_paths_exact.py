@@ -9,8 +9,9 @@ import perception as P
 from rover_state import RoverState
 
 
-def _reference_vote(mem, grid, x, y, yaw):
-    """The NumPy vote as it was before the compiled kernel (the reference for bit-exactness)."""
+def _reference_vote(mem, grid, x, y, yaw, occluded=None):
+    """The NumPy vote as it was before the compiled kernel (the reference for bit-exactness), with hidden
+    ground's votes weighed down as the kernel now does."""
     labels = grid.ravel()[P._MAP_CELLS]
     known = labels != P._LABEL_UNKNOWN
     xw, yw = P.rover_to_world(P._MAP_X[known], P._MAP_Y[known], x, y, yaw)
@@ -25,6 +26,8 @@ def _reference_vote(mem, grid, x, y, yaw):
     w_cols = x1 - x0
     local = (iy - y0) * w_cols + (ix - x0)
     w = P._MAP_WEIGHT[known_idx]
+    if occluded is not None:
+        w = np.where(occluded.ravel()[P._MAP_CELLS][known_idx] != 0, w * P.OCCLUDED_VOTE_WEIGHT, w)
     kind = labels[known_idx]
     is_nav = kind == P._LABEL_NAV
     size = (y1 - y0) * w_cols
@@ -51,11 +54,12 @@ def _reference_vote(mem, grid, x, y, yaw):
 
 
 def _label_grid(img, pitch, roll):
-    """The label grid perception_step warps from a camera frame (light sand, shadowed and dim sand, near-hue sand)."""
+    """The label grid perception_step warps from a camera frame (light sand, shadowed and dim sand, near-hue sand)
+    and its hidden-ground grid."""
     r = RoverState()
     r.img, r.pos, r.yaw, r.pitch, r.roll = img, (100.0, 100.0), 0.0, pitch, roll
     P.perception_step(r)
-    return P.get_memory(r).last_grid
+    return P.get_memory(r).last_grid, P._occluded_grid(P._pixel_labels(img)[0], pitch, roll)
 
 
 def _maps(mem):
@@ -69,17 +73,18 @@ def test_compiled_vote_equals_the_numpy_reference_bit_for_bit(test_dataset_dir):
     frames = read_log(test_dataset_dir).frames[::9]
     rng = np.random.default_rng(3)
     new, ref = P.PerceptionMemory(), P.PerceptionMemory()
-    poses = 0
+    poses = hidden = 0
     for f in frames:
         img = cv2.cvtColor(cv2.imread(str(f.image_path)), cv2.COLOR_BGR2RGB)
-        grid = _label_grid(img, rng.normal(0, 1.5), rng.normal(0, 1.5))
+        grid, occluded = _label_grid(img, rng.normal(0, 1.5), rng.normal(0, 1.5))
         assert (grid == P._LABEL_NAV).any() and (grid == P._LABEL_OBSTACLE).any()
+        hidden += int(occluded[grid != P._LABEL_UNKNOWN].any())
         # the logged pose, a random one, and one hanging over the map's edge (cells fall off it)
         for x, y, yaw in ((f.x, f.y, f.yaw), (rng.uniform(20, 180), rng.uniform(20, 180), rng.uniform(0, 360)),
                           (rng.uniform(-3, 3), rng.uniform(190, 203), rng.uniform(0, 360))):
-            assert P._vote(new, grid, x, y, yaw) == _reference_vote(ref, grid, x, y, yaw)
+            assert P._vote(new, grid, x, y, yaw, occluded) == _reference_vote(ref, grid, x, y, yaw, occluded)
             poses += 1
-    assert poses > 60 and np.isfinite(ref.look_range).sum() > 500
+    assert poses > 60 and np.isfinite(ref.look_range).sum() > 500 and hidden > 5
     for a, b in zip(_maps(new), _maps(ref)):
         assert a.dtype == b.dtype and np.array_equal(a, b)
     assert P._vote(new, grid, -50.0, -50.0, 0.0) is None  # nothing on the map
