@@ -500,6 +500,52 @@ def test_a_turn_back_faces_unsearched_wall_feet_first_then_ends_at_the_wanted_he
     assert fresh.rotate_via is None, "a way on ahead: no dead end, no glance"
 
 
+def _turn_until_done(nav, pos, yaw, t, t_end):
+    """Steer the turn in place in nav to its end (45 deg/s at full lock); (yaw, t, headings passed)."""
+    empty = np.zeros(0)
+    passed = []
+    while nav.rotate_heading is not None and t < t_end:
+        s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+        cmd = decision.mode_stop(nav, s)
+        if cmd is None:
+            break
+        yaw = (yaw + 3.0 * DT * cmd.steer) % 360.0
+        passed.append(yaw)
+        t += DT
+    return yaw, t, np.array(passed)
+
+
+def test_the_turn_back_after_a_glance_the_other_way_still_sweeps_the_planned_arc():
+    """Seed 0 at 10 fps: turning back 48 -> 291 deg (right, over the east nook at ~350 deg) the rover glanced
+    left at wall feet at ~120 deg, then turned back the short way from there (left again) and never faced the
+    nook. The turn back now goes right, through where the glance began, over the nook."""
+    pos = (145.5, 109.8)
+    nav = decision.NavMemory()
+    nav.unsearched = np.zeros((200, 200), bool)
+    nav.unsearched[112:115, 142:145] = True  # north-west wall feet, ~3.5 m off at ~120 deg: the glance
+    empty = np.zeros(0)
+    s = decision.Inputs(10.0, pos, 48.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+    decision._start_rotation(nav, s, 291.0, "path-behind")
+    assert nav.rotate_via == 291.0 and 90.0 <= nav.rotate_heading <= 150.0, "glances left first"
+    yaw, t, _ = _turn_until_done(nav, pos, 48.0, 10.0, 20.0)
+    t = max(t, nav.glance_hold_until)
+    s = decision.Inputs(t, pos, yaw, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+    decision._start_rotation(nav, s, 215.0, "path-behind")  # the path re-planned meanwhile: 215 deg, left of it
+    assert nav.rotate_dir == -1
+    yaw, t, passed = _turn_until_done(nav, pos, yaw, t, t + 10.0)
+    assert abs((yaw - 215.0 + 180.0) % 360.0 - 180.0) <= decision.ROTATE_EXIT_DEG + 3.0
+    assert (np.abs((passed - 350.0 + 180.0) % 360.0 - 180.0) < 10.0).any(), "the camera swept the nook"
+    fresh = decision.NavMemory()  # no glance before it: the short way
+    s = decision.Inputs(t, pos, 119.0, 0.0, empty, empty, empty, empty, empty, empty, False, False, 1)
+    decision._start_rotation(fresh, s, 215.0, "path-behind")
+    assert fresh.rotate_dir is None
+    nav.glance_return = (-1, pos, t + 10.0)  # a glance long ago or elsewhere does not steer the turn
+    s = decision.Inputs(t, (pos[0] + 5.0, pos[1]), 119.0, 0.0, empty, empty, empty, empty, empty, empty, False,
+                        False, 1)
+    decision._start_rotation(nav, s, 215.0, "path-behind")
+    assert nav.rotate_dir is None and nav.glance_return is None
+
+
 def test_a_rock_approach_decided_again_after_a_stuck_gets_its_own_close_timeout():
     """Seed 37 wedged twice at the east nook; the 30 s close timer ran out on the way to the third
     staging point (the one that works) and the rock was given up for 60 s."""
