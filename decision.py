@@ -1015,9 +1015,8 @@ def _start_rotation(nav, s, heading_deg, reason):
     nav.rotate_dir = None
     nav.rotate_via = None
     nav.fixed_steer = False
-    if _turn_back_after_glance(nav, s):
-        pass
-    elif reason in SWEEP_REASONS and search_plan.samples_missing(s) and nav.unsearched is not None:
+    if (not _turn_back_after_glance(nav, s) and reason in SWEEP_REASONS and search_plan.samples_missing(s)
+            and nav.unsearched is not None):
         way = explore.sweep_direction(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
         if way * predict.wrap_deg(nav.rotate_heading - s.yaw) < 0:
             nav.rotate_dir = way

@@ -845,7 +845,8 @@ def _occluded_grid(labels8: np.ndarray, pitch_deg: float, roll_deg: float) -> np
     cut = np.where(has_foot, CY - 0.5 + fh / (foot_m + VIEW_FOOT_MARGIN_M), -np.inf)  # first row still seen
     hidden = (np.arange(IMAGE_H, dtype=np.float64)[:, None] < cut[None, :]).view(np.uint8)
     h = _LEVEL_H if (pitch_deg == 0.0 and roll_deg == 0.0) else ground_homography(pitch_deg, roll_deg)
-    warped = cv2.warpPerspective(hidden, h, (_GRID_COLS, _GRID_ROWS), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+    warped = cv2.warpPerspective(hidden, h, (_GRID_COLS, _GRID_ROWS),
+                                 flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     return cv2.bitwise_and(warped, _GRID_USABLE_U8)  # ground behind the camera projects upside down: not in view
 
@@ -954,8 +955,8 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
     window = np.zeros(4, np.int64)
     if occluded is None:
         occluded = np.zeros(grid.shape, np.uint8)
-    found = _vote_kernel(grid.ravel(), occluded.ravel(), float(OCCLUDED_VOTE_WEIGHT), _MAP_CELLS, _MAP_X, _MAP_Y, _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST, _MAP_BAND,
-                         float(x), float(y), math.cos(a), math.sin(a), float(NAV_VOTE_WEIGHT),
+    found = _vote_kernel(grid.ravel(), occluded.ravel(), float(OCCLUDED_VOTE_WEIGHT), _MAP_CELLS, _MAP_X, _MAP_Y,
+                         _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST, _MAP_BAND, float(x), float(y), math.cos(a), math.sin(a), float(NAV_VOTE_WEIGHT),
                          float(OBS_VOTE_WEIGHT), mem.nav_votes, mem.obs_votes, mem.shade_votes,
                          mem.dim_shade_votes, mem.near_sand_votes, mem.look_range, mem.band_nav_votes, mem.band_votes,
                          window)
@@ -963,12 +964,12 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
 
 
 @njit(cache=True)
-def _vote_kernel(labels, occluded, occluded_weight, cells, map_x, map_y, map_weight, map_look, map_dist, map_band, xpos, ypos, c, s,
-                 nav_weight, obs_weight, nav_votes, obs_votes, shade_votes, dim_votes, near_votes, look_range, band_nav,
-                 band_all, window):
+def _vote_kernel(labels, occluded, occluded_weight, cells, map_x, map_y, map_weight, map_look, map_dist, map_band,
+                 xpos, ypos, c, s, nav_weight, obs_weight, nav_votes, obs_votes, shade_votes, dim_votes, near_votes,
+                 look_range, band_nav, band_all, window):
     """The votes of the grid cells ``cells`` (flat indices into ``labels``) at pose (xpos, ypos, yaw
-    with cos c, sin s), those where ``occluded`` is set weighted by ``occluded_weight``; writes (y0, y1, x0, x1) into ``window`` and returns False when no seen
-    cell falls on the map.
+    with cos c, sin s), those where ``occluded`` is set weighted by ``occluded_weight``; writes (y0, y1, x0, x1)
+    into ``window`` and returns False when no seen cell falls on the map.
 
     Module constants are passed in, never read as globals (numba would freeze them at compile
     time and a sweep that sets them would change nothing).  Bit-exactness with the NumPy version: world coordinates are ``xpos + x c - y s`` and

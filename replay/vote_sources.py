@@ -88,7 +88,8 @@ def _frame_votes(mem, x: float, y: float, yaw: float):
     idx = idx[ok]
     band = np.clip(np.digitize(perception._MAP_DIST[idx], RANGE_BANDS_M) - 1, 0, len(RANGE_BANDS_M) - 2)
     near = perception._MAP_DIST[idx] < NEAR_CONFIRM_RANGE_M
-    weight = np.where(hidden[idx], perception._MAP_WEIGHT[idx] * perception.OCCLUDED_VOTE_WEIGHT, perception._MAP_WEIGHT[idx])
+    weight = perception._MAP_WEIGHT[idx]
+    weight = np.where(hidden[idx], weight * perception.OCCLUDED_VOTE_WEIGHT, weight)
     return iy[ok] * n + ix[ok], band, weight, labels[idx], near
 
 
