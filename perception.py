@@ -804,12 +804,16 @@ def label_grid(nav: np.ndarray, pitch_deg=0.0, roll_deg=0.0) -> np.ndarray:
 
     Returns uint8 (rows, cols): 0 unknown (outside view / too near), 1 obstacle, 2 navigable.
     """
-    return _warp_labels(_to_u8(nav), pitch_deg, roll_deg)
+    return _warp_labels(_to_u8(nav), _frame_homography(pitch_deg, roll_deg))
 
 
-def _warp_labels(nav8: np.ndarray, pitch_deg: float, roll_deg: float) -> np.ndarray:
-    """label_grid for a uint8 0/255 mask (the hot path: no conversion)."""
-    h = _LEVEL_H if (pitch_deg == 0.0 and roll_deg == 0.0) else ground_homography(pitch_deg, roll_deg)
+def _frame_homography(pitch_deg: float, roll_deg: float) -> np.ndarray:
+    """ground_homography for a frame's tilt (the precomputed level one when level); a frame's warps share it."""
+    return _LEVEL_H if (pitch_deg == 0.0 and roll_deg == 0.0) else ground_homography(pitch_deg, roll_deg)
+
+
+def _warp_labels(nav8: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """label_grid for a uint8 0/255 mask (the hot path: no conversion) through the frame's homography ``h``."""
     warped = cv2.warpPerspective(nav8, h, (_GRID_COLS, _GRID_ROWS),
                                  flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=_WARP_BORDER)
@@ -831,7 +835,7 @@ def _column_feet(labels8: np.ndarray):
     return has_foot, FOCAL_PX * CAMERA_HEIGHT_M / np.where(has_foot, below, 1.0)
 
 
-def _occluded_grid(labels8: np.ndarray, pitch_deg: float, roll_deg: float) -> np.ndarray:
+def _occluded_grid(labels8: np.ndarray, h: np.ndarray) -> np.ndarray:
     """uint8 top-down grid, 1 where this frame's ground was hidden from the camera.
 
     The camera is 0.21 m above the floor, so the flat-floor projection paints any rock or wall face
@@ -839,12 +843,11 @@ def _occluded_grid(labels8: np.ndarray, pitch_deg: float, roll_deg: float) -> np
     a wedge of wall votes over true floor from every side it was seen from (seed 12, shadows on).
     Ground more than VIEW_FOOT_MARGIN_M beyond a column's foot is hidden; its votes, floor and wall
     alike, count OCCLUDED_VOTE_WEIGHT of one, so the views that did see it decide.  Rows are cut
-    at the level camera's range (like _column_feet); the warp then applies the frame's tilt."""
+    at the level camera's range (like _column_feet); the warp (the frame's homography ``h``) applies its tilt."""
     has_foot, foot_m = _column_feet(labels8)
     fh = FOCAL_PX * CAMERA_HEIGHT_M
     cut = np.where(has_foot, CY - 0.5 + fh / (foot_m + VIEW_FOOT_MARGIN_M), -np.inf)  # first row still seen
     hidden = (np.arange(IMAGE_H, dtype=np.float64)[:, None] < cut[None, :]).view(np.uint8)
-    h = _LEVEL_H if (pitch_deg == 0.0 and roll_deg == 0.0) else ground_homography(pitch_deg, roll_deg)
     warped = cv2.warpPerspective(hidden, h, (_GRID_COLS, _GRID_ROWS),
                                  flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
@@ -1177,7 +1180,8 @@ def perception_step(rover):
     roll = _signed(rover.roll) if _finite(rover.roll) else 0.0
 
     labels8, nav8, rock8, shade8 = _pixel_labels(img)
-    grid = _warp_labels(labels8, pitch, roll)
+    homography = _frame_homography(pitch, roll)
+    grid = _warp_labels(labels8, homography)
     mem.last_grid = grid
 
     # decision outputs (always, even when tilted: the warp already accounts for tilt);
@@ -1191,7 +1195,7 @@ def perception_step(rover):
 
     window = None
     if pose_ok and votes:
-        mem.last_occluded = _occluded_grid(labels8, pitch, roll)
+        mem.last_occluded = _occluded_grid(labels8, homography)
         window = _vote(mem, grid, float(pos[0]), float(pos[1]), float(rover.yaw), mem.last_occluded)
         mem.frames_mapped += 1
         rover.map_updated = True

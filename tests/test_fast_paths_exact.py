@@ -59,7 +59,7 @@ def _label_grid(img, pitch, roll):
     r = RoverState()
     r.img, r.pos, r.yaw, r.pitch, r.roll = img, (100.0, 100.0), 0.0, pitch, roll
     P.perception_step(r)
-    return P.get_memory(r).last_grid, P._occluded_grid(P._pixel_labels(img)[0], pitch, roll)
+    return P.get_memory(r).last_grid, P._occluded_grid(P._pixel_labels(img)[0], P._frame_homography(pitch, roll))
 
 
 def _maps(mem):
