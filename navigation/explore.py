@@ -51,6 +51,7 @@ SWEEP_MIN_CELLS = 3  # ...and only when it sweeps at least this many unsearched 
 GLANCE_MIN_CELLS = 3  # a turn back glances first at unsearched wall feet within SEARCH_FACE_RADIUS_M only when the best heading outside its sweep holds this many (a sample nook is wider), cells
 GLANCE_MAX_EXTRA_DEG = 180.0  # ...and only when the glance adds at most this much turning to the turn back (~4 s at 45 deg/s; glancing at every turn back cost seeds 0, 3 and 7 40-70 s), degrees
 SIGHT_WALL_DEPTH_M = 0.7  # a line of sight sees mapped wall this deep past where it first meets wall, no deeper (map edges are a cell fuzzy; a rock in front hides the nook behind it: seeds 7, 15), m
+SIGHT_REACH_MARGIN_M = 1.5  # ...and this far past where the frame's light floor ends in its direction (the fringe where a wall's foot blends into the floor is not light sand), m
 SIGHT_STEP_M = 0.2  # line-of-sight march step, m
 SIGHT_RAY_DEG = 2.0  # angle between lines of sight (0.14 m apart at 4 m, well under a cell), degrees
 SIGHT_MIN_FORWARD_M = 0.6  # ground nearer than this (ahead of the rover) is hidden under the camera (perception.GRID_MIN_FORWARD_M), m
@@ -124,7 +125,7 @@ def mark_seen_close(seen, pos, yaw_deg, radius_m=SEEN_CLOSE_M):
 
 @njit(cache=True)
 def _sight_kernel(worldmap, seen, x, y, yaw, half_fov, n_rays, max_range, step, min_forward, wall_depth,
-                  nav_min, dominance, reach, reach_half_fov_deg, reach_bin_deg):
+                  nav_min, dominance, reach, reach_half_fov_deg, reach_bin_deg, reach_margin):
     """March n_rays lines of sight over yaw +- half_fov (radians) from (x, y) out to max_range and mark
     every cell they reach in ``seen``. A cell is opaque when the worldmap calls it obstacle (red > 0
     and not navigable by grid.classify's rule, with nav_min / dominance passed in); a line stops
@@ -140,7 +141,7 @@ def _sight_kernel(worldmap, seen, x, y, yaw, half_fov, n_rays, max_range, step, 
         far = max_range
         if reach.size > 0:
             k = int(math.floor((off * (180.0 / math.pi) + reach_half_fov_deg) / reach_bin_deg))
-            far = min(far, reach[k] + wall_depth) if 0 <= k < reach.size else far
+            far = min(far, reach[k] + reach_margin) if 0 <= k < reach.size else far
         while r <= far:
             cx = int(math.floor(x + r * c))
             cy = int(math.floor(y + r * s))
@@ -178,7 +179,8 @@ def mark_in_sight(seen, worldmap, pos, yaw_deg, range_m, half_fov_deg, reach=Non
     reach = np.zeros(0) if reach is None else np.ascontiguousarray(reach, dtype=np.float64)
     _sight_kernel(wm, seen, float(pos[0]), float(pos[1]), math.radians(yaw_deg), half, n_rays, float(range_m),
                   SIGHT_STEP_M, SIGHT_MIN_FORWARD_M, SIGHT_WALL_DEPTH_M, np.float32(grid.NAV_MIN_VALUE),
-                  np.float32(grid.OBSTACLE_DOMINANCE), reach, float(reactive.FOV_HALF_DEG), float(reactive.BIN_DEG))
+                  np.float32(grid.OBSTACLE_DOMINANCE), reach, float(reactive.FOV_HALF_DEG), float(reactive.BIN_DEG),
+                  SIGHT_REACH_MARGIN_M)
     return seen
 
 
