@@ -131,7 +131,7 @@ def _sight_kernel(worldmap, seen, x, y, yaw, half_fov, n_rays, max_range, step, 
     and not navigable by grid.classify's rule, with nav_min / dominance passed in); a line stops
     once it has run more than wall_depth through opaque cells. With a non-empty ``reach`` (this
     frame's free distance per angular bin, navigation.reactive.reach_profile) a line also stops
-    wall_depth beyond where the camera saw the floor end."""
+    reach_margin beyond where the camera saw the floor end."""
     size_y, size_x = seen.shape
     for i in range(n_rays):
         off = -half_fov + 2.0 * half_fov * i / (n_rays - 1) if n_rays > 1 else 0.0
@@ -160,8 +160,8 @@ def _sight_kernel(worldmap, seen, x, y, yaw, half_fov, n_rays, max_range, step, 
 def mark_in_sight(seen, worldmap, pos, yaw_deg, range_m, half_fov_deg, reach=None):
     """Mark (in place) the cells within range_m and half_fov_deg of the heading that the camera can
     see from pos: lines of sight pass mapped floor freely and stop SIGHT_WALL_DEPTH_M into mapped wall
-    and, with `reach` (this frame's reactive.reach_profile), SIGHT_WALL_DEPTH_M beyond the floor the
-    camera saw in their direction.
+    and, with `reach` (this frame's reactive.reach_profile), SIGHT_REACH_MARGIN_M beyond the light floor
+    the camera saw in their direction (the darker fringe at a wall's foot lies past it).
 
     Perception's closest-look map records every cell of the ground footprint, including the cells
     a rock in front hides: on seeds 7 and 15 the rover faced the east-nook sample from 3.5 m across

@@ -532,6 +532,24 @@ def test_a_rock_in_front_hides_the_nook_behind_it_from_the_search():
     assert not away[113:, :].any()
 
 
+def test_a_wall_foot_past_the_fringe_of_non_light_sand_is_in_sight():
+    """The frame's light floor ends about a metre before a wall: the fringe where the wall's foot blends into
+    the floor is darker sand. Lines of sight that stopped 0.7 m past the light floor never reached the wall
+    feet, so the search kept them all as unsearched (and exploration, in a trial, kept every wall a frontier)."""
+    wm = np.zeros((200, 200, 3), np.uint8)
+    wm[:, :, 0] = 255
+    wm[100:115, 130:160, 0], wm[100:115, 130:160, 2] = 0, 255  # floor y 100-114, wall from y 115 (its foot)
+    n = int(round(2 * reactive.FOV_HALF_DEG / reactive.BIN_DEG))
+    pos = (145.5, 111.0)  # the wall foot 4 m ahead (north)
+    fringe = np.zeros((200, 200), bool)
+    explore.mark_in_sight(fringe, wm, pos, 90.0, 4.5, 40.0, np.full(n, 3.0))  # light floor ends 1 m short of it
+    assert fringe[115, 145], "the wall foot behind a 1 m fringe is in sight"
+    assert not fringe[116, 145], "the wall behind its foot is not"
+    blind = np.zeros((200, 200), bool)
+    explore.mark_in_sight(blind, wm, pos, 90.0, 4.5, 40.0, np.full(n, 1.0))  # the frame shows floor to 1 m only
+    assert not blind[115, 145], "a foot 3 m past the last floor the frame showed is not"
+
+
 def test_a_rock_face_filling_the_frame_hides_what_the_map_calls_clear():
     """Seed 15: the rock in front of the nook was mapped as floor; the camera, pressed against it,
     saw no floor at all, and the nook behind must not count as searched."""
