@@ -1015,8 +1015,8 @@ def _start_rotation(nav, s, heading_deg, reason):
     nav.rotate_dir = None
     nav.rotate_via = None
     nav.fixed_steer = False
-    if (not _turn_back_after_glance(nav, s) and reason in SWEEP_REASONS and search_plan.samples_missing(s)
-            and nav.unsearched is not None):
+    returning = _turn_back_after_glance(nav, s)  # always asked: it also ends the glance's claim on the next turn
+    if not returning and reason in SWEEP_REASONS and search_plan.samples_missing(s) and nav.unsearched is not None:
         way = explore.sweep_direction(nav.unsearched, s.pos, s.yaw, nav.rotate_heading)
         if way * predict.wrap_deg(nav.rotate_heading - s.yaw) < 0:
             nav.rotate_dir = way
