@@ -959,8 +959,8 @@ def _vote(mem: PerceptionMemory, grid: np.ndarray, x: float, y: float, yaw: floa
     if occluded is None:
         occluded = np.zeros(grid.shape, np.uint8)
     found = _vote_kernel(grid.ravel(), occluded.ravel(), float(OCCLUDED_VOTE_WEIGHT), _MAP_CELLS, _MAP_X, _MAP_Y,
-                         _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST, _MAP_BAND, float(x), float(y), math.cos(a), math.sin(a), float(NAV_VOTE_WEIGHT),
-                         float(OBS_VOTE_WEIGHT), mem.nav_votes, mem.obs_votes, mem.shade_votes,
+                         _MAP_WEIGHT, _MAP_LOOK, _MAP_DIST, _MAP_BAND, float(x), float(y), math.cos(a), math.sin(a),
+                         float(NAV_VOTE_WEIGHT), float(OBS_VOTE_WEIGHT), mem.nav_votes, mem.obs_votes, mem.shade_votes,
                          mem.dim_shade_votes, mem.near_sand_votes, mem.look_range, mem.band_nav_votes, mem.band_votes,
                          window)
     return (int(window[0]), int(window[1]), int(window[2]), int(window[3])) if found else None
