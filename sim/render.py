@@ -242,7 +242,7 @@ def bake_rasters(world: World):
                            interpolation=cv2.INTER_CUBIC) for cells in TEXTURE_CELLS) / len(TEXTURE_CELLS)
     rough = 1.0 + TEXTURE_AMPLITUDE * noise * np.clip((0.7 - sand) / 0.4, 0.0, 1.0)
     # terrain colour everywhere (what a ray hitting the ground sees), bilinear in the kernel
-    from sim.shading import cast_shadow_cover, floor_red_gain, shadowless_wall_foot_light
+    from sim.shading import cast_shadow_cover, floor_red_gain, shadowless_wall_foot_light, wall_foot_red_grain
 
     cover = cast_shadow_cover(shadow) if world.cast_shadows else shadow
     darkening = (1.0 - _shadow_factor(world)) * cover
@@ -250,6 +250,7 @@ def bake_rasters(world: World):
     if not world.cast_shadows:  # the quality levels without cast shadows draw the wall feet darker (sim/shading.py item 7)
         light = light * shadowless_wall_foot_light(sand)
     ground_rgb[..., 0] *= floor_red_gain(sand, darkening)  # wall feet and shaded floor redder (sim/shading.py item 6)
+    ground_rgb[..., 0] *= wall_foot_red_grain(sand)  # wall feet vary in hue from texel to texel (sim/shading.py item 8)
     colour_ground = np.clip(ground_rgb * (rough * light)[..., None], 0, 255).astype(np.uint8)
     # rock colour (what a ray hitting a rock slab sees), nearest cell in the kernel
     rock_rgb = np.array(ROCK_RGB, np.float32) * (1.0 + TEXTURE_AMPLITUDE * noise)[..., None]

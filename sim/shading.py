@@ -99,6 +99,10 @@ SHADOW_RED_PER_DARKENING = 0.044  # extra red of floor the terrain shades, per u
 SHADOWLESS_WALL_FOOT_DARKEN = 0.10  # darkening of the wall-foot floor at the quality levels without cast shadows (item 7), fraction
 SHADOWLESS_WALL_FOOT_FULL_BELOW = 0.775  # ... in full at and below this sand weight, 0..1
 SHADOWLESS_WALL_FOOT_NONE_FROM = 0.80  # ... fading to none at this sand weight (open floor as before), 0..1
+WALL_FOOT_HUE_GRAIN = 0.045  # red spread of the wall-foot floor per 0.1 m vertex (sigma of a half-normal: only ever redder; item 8), fraction
+WALL_FOOT_GRAIN_FULL_BELOW = 0.75  # ... in full at and below this sand weight, 0..1
+WALL_FOOT_GRAIN_NONE_FROM = 0.85  # ... fading to none at this sand weight (open floor keeps the colour table's colour), 0..1
+WALL_FOOT_GRAIN_SEED = 2718  # seed of the grain's fixed random field
 
 
 def shadowless_darkening(dist_m) -> np.ndarray:
@@ -149,6 +153,16 @@ def shadowless_wall_foot_light(sand: np.ndarray) -> np.ndarray:
     colour table was fitted on, while open sand reads the same."""
     ramp = wall_foot_ramp(sand, SHADOWLESS_WALL_FOOT_FULL_BELOW, SHADOWLESS_WALL_FOOT_NONE_FROM)
     return (1.0 - SHADOWLESS_WALL_FOOT_DARKEN * ramp).astype(np.float32)
+
+
+def wall_foot_red_grain(sand: np.ndarray, seed: int = WALL_FOOT_GRAIN_SEED) -> np.ndarray:
+    """Factor on the red channel per terrain vertex (item 8): the real wall-foot floor blends sand with six rock
+    layers that vary from texel to texel, so its pixels spread in hue around the colour table's one colour per
+    sand weight, always toward the rock layers' red; a fixed half-normal grain per 0.1 m vertex, in full on the
+    wall feet and none on open sand.  Red only: the starter's 160 threshold never sees it."""
+    rng = np.random.default_rng(seed)  # fixed: the grain is part of the look, not random per run
+    ramp = wall_foot_ramp(sand, WALL_FOOT_GRAIN_FULL_BELOW, WALL_FOOT_GRAIN_NONE_FROM)
+    return (1.0 + WALL_FOOT_HUE_GRAIN * ramp * np.abs(rng.standard_normal(np.shape(sand), np.float32))).astype(np.float32)
 
 
 def splat_pyramid(sand_weight: np.ndarray) -> np.ndarray:

@@ -195,7 +195,7 @@ def test_floor_red_gain_reddens_wall_feet_and_shaded_floor_only():
 
 @pytest.mark.parametrize("shadows", [False, True])
 def test_floor_red_gain_leaves_the_starter_threshold_alone(shadows, monkeypatch):
-    """The gain raises red only, never sand's darkest channel: frames with and without it differ in red alone, and
+    """The gains (items 6 and 8) raise red only, never sand's darkest channel: frames with and without it differ in red alone, and
     the starter's navigable mask (every channel > 160) is the same pixel for pixel."""
     from dataclasses import replace
 
@@ -212,6 +212,7 @@ def test_floor_red_gain_leaves_the_starter_threshold_alone(shadows, monkeypatch)
     shipped = frames()
     monkeypatch.setattr(shading, "WALL_FOOT_RED_GAIN", 0.0)
     monkeypatch.setattr(shading, "SHADOW_RED_PER_DARKENING", 0.0)
+    monkeypatch.setattr(shading, "WALL_FOOT_HUE_GRAIN", 0.0)  # item 8's grain is red only too
     plain = frames()
     redder = 0
     for a, b in zip(shipped, plain):
@@ -220,6 +221,20 @@ def test_floor_red_gain_leaves_the_starter_threshold_alone(shadows, monkeypatch)
         redder += int(np.count_nonzero(a[..., 0] > b[..., 0]))
         assert np.array_equal(np.all(a > 160, axis=2), np.all(b > 160, axis=2))
     assert redder > 1000  # the gain is exercised
+
+
+def test_wall_foot_red_grain_spreads_wall_feet_toward_red_and_leaves_open_sand_alone():
+    """Item 8: a fixed half-normal red grain per vertex, in full at and below weight 0.75, none from 0.85."""
+    sand = np.repeat([[0.3], [shading.WALL_FOOT_GRAIN_FULL_BELOW], [0.8], [shading.WALL_FOOT_GRAIN_NONE_FROM], [1.0]],
+                     4000, axis=1)
+    grain = shading.wall_foot_red_grain(sand)
+    assert grain.dtype == np.float32 and np.all(grain >= 1.0)
+    assert np.all(grain[3:] == 1.0)  # open sand keeps the colour table's colour
+    spread = (grain - 1.0).mean(axis=1)
+    half_normal_mean = shading.WALL_FOOT_HUE_GRAIN * np.sqrt(2 / np.pi)
+    assert spread[0] == pytest.approx(half_normal_mean, rel=0.05) and spread[1] == pytest.approx(half_normal_mean, rel=0.05)
+    assert 0.0 < spread[2] < spread[1]  # fading out between the two weights
+    assert np.array_equal(grain, shading.wall_foot_red_grain(sand))  # fixed, not random per bake
 
 
 def test_shadowless_wall_foot_light_darkens_the_wall_foot_band_only():
