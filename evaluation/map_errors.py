@@ -53,6 +53,11 @@ class ConditionErrors:
     missed_unseen: np.ndarray  # int, missions that never marked a truth cell at all
     per_mission: List[dict] = field(default_factory=list)  # seed, false, missed_obstacle, missed_unseen
 
+    @property
+    def missed(self) -> np.ndarray:
+        """int, missions that missed the truth cell either way."""
+        return self.missed_obstacle + self.missed_unseen
+
 
 def count_errors(worldmaps, truth: np.ndarray):
     """(false_nav, missed_obstacle, missed_unseen, per-mission counts) over worldmaps ([y, x] RGB, blue = navigable)."""
@@ -152,7 +157,7 @@ def load_condition(name: str, folder: Path, fallback_truth: Optional[np.ndarray]
 
 def summary(ce: ConditionErrors, share: float, cell_features=None) -> dict:
     """The condition's figures: errors per mission, systematic cells by kind and terrain, the remaining-error scores."""
-    missed = ce.missed_obstacle + ce.missed_unseen
+    missed = ce.missed
     sys_false, sys_missed = systematic(ce.false_nav, ce.missions, share), systematic(missed, ce.missions, share)
     med = lambda key: float(np.median([r[key] for r in ce.per_mission]))  # noqa: E731
     out = {
@@ -182,7 +187,7 @@ def error_image(ce: ConditionErrors, share: float) -> np.ndarray:
     n = max(1, ce.missions)
     img = np.zeros(ce.truth.shape + (3,), np.uint8)
     img[ce.truth] = TRUTH_GREY
-    missed = ce.missed_obstacle + ce.missed_unseen
+    missed = ce.missed
     for counts, channel in ((ce.false_nav, 2), (missed, 0)):
         wrong = counts > 0
         level = (90 + 165 * counts / n).clip(0, 255).astype(np.uint8)
