@@ -130,6 +130,21 @@ def parse_seeds(text: str) -> list:
     return sorted(seeds)
 
 
+def format_seeds(seeds) -> str:
+    """Sorted unique seeds -> the shortest text parse_seeds reads back: [40, 41, 42, 90] -> '40-42,90'.
+
+    Reports used to print first-last, so a run of seeds 40-49 and 90-99 was headed 'seeds 40-99'."""
+    ordered = sorted(set(int(s) for s in seeds))
+    parts, start = [], None
+    for i, seed in enumerate(ordered):
+        if start is None:
+            start = seed
+        if i + 1 == len(ordered) or ordered[i + 1] != seed + 1:
+            parts.append(str(seed) if seed == start else f"{start}-{seed}")
+            start = None
+    return ",".join(parts)
+
+
 class SimSecondsMeter:
     """Mission watcher that adds simulated seconds to a shared counter every few frames,
     so the parent's progress bar moves per frame, not per finished mission."""
@@ -335,7 +350,7 @@ def run_batch(seeds, world: WorldOptions, options: MissionOptions, jobs=DEFAULT_
     done = [r for r in results if "mapped_pct" in r and r.get("end_reason") != INTERRUPTED]
     summary = summarise(done)
     world_name = next((r.get("world") for r in results if r.get("world")), world.spec)
-    meta = {"world": world_name, "seeds": f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0]),
+    meta = {"world": world_name, "seeds": format_seeds(seeds),
             "count": len(seeds), "finished": len(done), **world.describe(), "jobs": jobs, **options.describe(),
             "interrupted": interrupted,
             "failed": sum(str(r.get("end_reason", "")).startswith(ERROR_PREFIX) for r in results),
@@ -412,7 +427,7 @@ MATRIX_COLUMNS = (("condition", "condition"), ("shadows", "shadows"), ("fps", "f
 
 
 def matrix_markdown(rows: list, seeds: list, time_limit: float) -> str:
-    lines = [f"# Evaluation matrix: seeds {seeds[0]}-{seeds[-1]} ({len(seeds)}), unity timing "
+    lines = [f"# Evaluation matrix: seeds {format_seeds(seeds)} ({len(seeds)}), unity timing "
              f"(the real simulator's loop, no sim_time), time limit {time_limit:.0f} s", "",
              "| " + " | ".join(h for _, h in MATRIX_COLUMNS) + " |", "|" + "---|" * len(MATRIX_COLUMNS)]
     for r in rows:

@@ -68,6 +68,10 @@ def test_parse_seeds_and_summary():
 
     assert parse_seeds("0-3") == [0, 1, 2, 3]
     assert parse_seeds("5, 1,1,8-9") == [1, 5, 8, 9]
+    from sim.evaluate import format_seeds
+    assert format_seeds(parse_seeds("40-49,90-99")) == "40-49,90-99", "not 40-99: fifty seeds never run"
+    assert format_seeds([9, 1, 2, 3, 5, 5]) == "1-3,5,9"
+    assert parse_seeds(format_seeds([0, 7, 8, 200])) == [0, 7, 8, 200]
     with pytest.raises(ValueError):
         parse_seeds("9-2")
     with pytest.raises(ValueError):
