@@ -308,7 +308,7 @@ def test_faint_pockets_finds_a_slot_of_weak_sand_but_not_a_fuzzy_edge():
 
 # Twin seed 17, shadows on, 770 s: the south arm's east pocket, rows y 46..53, columns x 108..123.
 # Sand share of each cell's votes as perception.sand_share gave it (the pocket's floor, x 116-120 on
-# y 49-51, lies in cast shadow and was voted wall), and the drive map's floor (1) and wall (0).
+# y 49-51, lies in cast shadow and was voted wall), and the drive map's floor (F; the rest is wall).
 _SEED17_POCKET_SHARE = np.array([
     [0.10, 0.82, 1.00, 1.00, 0.99, 0.91, 0.32, 0.04, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00],
     [0.19, 0.87, 1.00, 1.00, 0.99, 0.98, 0.66, 0.15, 0.03, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00],
@@ -318,15 +318,16 @@ _SEED17_POCKET_SHARE = np.array([
     [0.88, 0.99, 1.00, 0.99, 0.71, 0.27, 0.08, 0.00, 0.00, 0.00, 0.00, 0.01, 0.03, 0.00, 0.00, 0.00],
     [0.97, 1.00, 0.98, 0.59, 0.04, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.03, 0.00, 0.00, 0.00],
     [0.98, 0.98, 0.77, 0.04, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00]], np.float32)
-_SEED17_POCKET_FLOOR = np.array([
-    [0, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
-    [0, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0],
-    [1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0],
-    [1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0],
-    [1, 1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0],
-    [1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
-    [1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
-    [1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]], bool)
+_SEED17_POCKET_FLOOR = np.array([[c == "F" for c in row] for row in (  # F: floor
+    ".FFFFF..........",
+    ".FFFFFF.........",
+    "FFFFFFF.........",
+    "FFFFFFFF........",
+    "FFFFFFFF........",
+    "FFFFFF..........",
+    "FFFF............",
+    "FFF.............",
+)])
 
 
 def test_faint_pockets_find_seed_17s_shadowed_pocket_from_its_measured_votes():
