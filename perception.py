@@ -464,8 +464,8 @@ def sand_share(rover) -> np.ndarray:
     cell's votes, 0 for never-seen cells.
 
     Sand in a deep cast shadow loses the vote to the wall around it, but a slot's floor still keeps
-    5-30 % of its votes as sand, where a wall two cells from the floor keeps 0-4 %: the sample search
-    uses that faint evidence to look into pockets mapped as wall (seeds 14 and 17, shadows on).
+    a tenth to a third of its votes as sand, where a wall two cells from the floor keeps almost none:
+    the sample search uses that faint evidence to look into pockets mapped as wall (seed 14, shadows on).
     """
     mem = get_memory(rover)
     total = mem.nav_votes + mem.obs_votes

@@ -306,50 +306,6 @@ def test_faint_pockets_finds_a_slot_of_weak_sand_but_not_a_fuzzy_edge():
     assert not explore.faint_pockets(free2, obstacle2, share2)[99:102, 82:86].any()
 
 
-# Twin seed 17, shadows on, 770 s: the south arm's east pocket, rows y 46..53, columns x 108..123.
-# Sand share of each cell's votes as perception.sand_share gave it (the pocket's floor, x 116-120 on
-# y 49-51, lies in cast shadow and was voted wall), and the drive map's floor (F; the rest is wall).
-_SEED17_POCKET_SHARE = np.array([
-    [0.10, 0.82, 1.00, 1.00, 0.99, 0.91, 0.32, 0.04, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00],
-    [0.19, 0.87, 1.00, 1.00, 0.99, 0.98, 0.66, 0.15, 0.03, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00],
-    [0.30, 0.94, 1.00, 1.00, 1.00, 1.00, 0.91, 0.43, 0.17, 0.04, 0.07, 0.01, 0.00, 0.00, 0.00, 0.00],
-    [0.52, 0.97, 1.00, 1.00, 1.00, 0.99, 0.97, 0.80, 0.32, 0.10, 0.05, 0.03, 0.00, 0.00, 0.00, 0.00],
-    [0.72, 0.98, 1.00, 1.00, 0.99, 0.95, 0.79, 0.46, 0.11, 0.05, 0.07, 0.04, 0.00, 0.00, 0.00, 0.00],
-    [0.88, 0.99, 1.00, 0.99, 0.71, 0.27, 0.08, 0.00, 0.00, 0.00, 0.00, 0.01, 0.03, 0.00, 0.00, 0.00],
-    [0.97, 1.00, 0.98, 0.59, 0.04, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.03, 0.00, 0.00, 0.00],
-    [0.98, 0.98, 0.77, 0.04, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00, 0.00]], np.float32)
-_SEED17_POCKET_FLOOR = np.array([[c == "F" for c in row] for row in (  # F: floor
-    ".FFFFF..........",
-    ".FFFFFF.........",
-    "FFFFFFF.........",
-    "FFFFFFFF........",
-    "FFFFFFFF........",
-    "FFFFFF..........",
-    "FFFF............",
-    "FFF.............",
-)])
-
-
-def test_faint_pockets_find_seed_17s_shadowed_pocket_from_its_measured_votes():
-    """Its floor kept 4-11 % of its votes as sand, under the old 10 % line: the search never looked in and
-    the sample at (122.3, 51.7) was lost (5/6 at 835 s). The arm's own fuzzy west edge is no pocket."""
-    free = np.zeros((200, 200), bool)
-    share = np.zeros((200, 200), np.float32)
-    free[46:54, 108:124] = _SEED17_POCKET_FLOOR
-    share[46:54, 108:124] = _SEED17_POCKET_SHARE
-    obstacle = ~free
-    obstacle[46:54, 120:124] = share[46:54, 120:124] > 0  # beyond the pocket's end: never seen (unknown)
-    looked = np.zeros((200, 200), bool)
-    looked[46:54, 108:116] = True  # the camera passed within 4 m of the arm's floor and the pocket's mouth
-    pockets = explore.faint_pockets(free, obstacle, share)
-    clusters = explore.enterable_pockets(pockets, pockets & ~looked, free)
-    assert clusters[50, 118] > 0, "the pocket reaches 3 m past the arm's floor"
-    assert not clusters[46:54, 108].any(), "the west edge's fringe is not a pocket"
-    dist, _ = astar.distance_field(grid.cost_grid(free, obstacle, soft_obstacles=True), (50, 112))
-    targets = explore.peek_targets(free, clusters > 0, looked, np.zeros((200, 200), bool), dist)
-    assert len(targets) == 1 and 116 <= targets[0][1] <= 119 and 48 <= targets[0][0] <= 51, "into the pocket"
-
-
 def _pocket_entries(pockets, unlooked, free, looked, done, dist):
     """(targets, clusters) as search_plan._pocket_goal gets them."""
     clusters = explore.enterable_pockets(pockets, unlooked, free)
