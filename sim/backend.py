@@ -301,7 +301,7 @@ def evaluate_tasks(seeds, world_spec="default", jobs=2, time_limit=900.0, out="o
 
     Same outputs as `sim.evaluate.evaluate`: per-seed folders, evaluation.{json,csv,md}.
     """
-    from sim.evaluate import summarise, write_outputs
+    from sim.evaluate import format_seeds, summarise, write_outputs
 
     if client:
         client = str(Path(client).resolve())
@@ -325,7 +325,7 @@ def evaluate_tasks(seeds, world_spec="default", jobs=2, time_limit=900.0, out="o
     done = [r for r in results if "mapped_pct" in r]
     summary = summarise(done)
     world_name = next((r.get("world") for r in results if r.get("world")), world_spec)
-    meta = {"world": world_name, "seeds": f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0]),
+    meta = {"world": world_name, "seeds": format_seeds(seeds),
             "count": len(seeds), "finished": len(done), "shadows": "on" if shadows else "off", "jobs": jobs,
             "time_limit_s": time_limit, "home_by_s": home_by, **timing.describe(), "client": client,
             "backend": scheduler or "local", "code": fp, "interrupted": False,

@@ -39,7 +39,7 @@ from drive_rover import add_home_by_option
 from sim.backend import (MissionTask, add_scheduler_option, code_fingerprint, resolve_constant, run_tasks,
                          timing_fields)
 from sim.cli import add_shadows_option, parse_with_logging
-from sim.evaluate import parse_seeds
+from sim.evaluate import format_seeds, parse_seeds
 from sim.mission import TIME_LIMIT_S, timing_label
 from sim.timing import Timing, add_timing_options, timing_from_args
 
@@ -228,7 +228,7 @@ def sweep(specs, seeds, world="default", shadows=False, time_limit=TIME_LIMIT_S,
     rows = [summarise_combo(g) for g in grouped]
     out = Path(out)
     md = markdown(names, combos, rows, currents)
-    seeds_text = f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 1 else str(seeds[0])
+    seeds_text = format_seeds(seeds)
     world = next((m["world"] for g in grouped for m in g if m.get("world")), world)  # "default" -> its name
     title = (f"sweep on {world}, seeds {seeds_text}, time limit {time_limit:.0f} s, shadows {'on' if shadows else 'off'}, "
              f"{timing_label(timing.describe())}")
