@@ -13,6 +13,10 @@ tool makes those weights reproducible and keeps fitted and checked drives apart:
 - ``fit DIR --fit NAME ...`` fits the weights on the named drives only, prints them, prints the issue's
   shortfall (points of mapped and fidelity below the targets, summed) for each probability threshold on the
   fitted and on the other (checked) drives, and a table per drive: today's constants, the fitted model.
+- ``trade DIR`` moves only the shipped model's probability line and prints, per drive, what it trades: mapped
+  against fidelity at each line, the share of map_bw's floor the drive saw at all (the most any cell model can
+  map), and the most mapped each fidelity line allows.  It answers whether a target pair can be met by reading
+  the same votes more boldly, on drives the model was not fitted on as well as those it was.
 """
 from __future__ import annotations
 
@@ -35,6 +39,10 @@ RIDGE = 1e-3  # L2 penalty on the (standardised) weights, per cell
 NEWTON_STEPS = 30  # Newton iterations of the logistic fit (it converges in under ten)
 THRESHOLDS = tuple(np.round(np.arange(0.25, 0.651, 0.025), 3))  # model probabilities the shortfall is printed for
 TWIN_TARGET = (98.0, 96.0)  # (mapped, fidelity) % the issue asks of twin missions
+TRADE_LINES = tuple(np.round(np.arange(0.05, 0.651, 0.05), 3))  # probability lines the trade table prints
+TRADE_FINE_LINES = tuple(np.round(np.arange(0.01, 0.951, 0.01), 3))  # ...and the finer grid its summary searches
+TRADE_FIDELITY_FLOORS = (96.0, 97.0)  # fidelity lines (the twin's, the real logs') the trade summary reads mapped at, %
+TRADE_MAPPED_FLOORS = (95.0, 98.0)  # mapped lines (the real logs', the twin's) the trade summary reads fidelity at, %
 REAL_TARGETS = {"megalphian": (95.0, 97.0), "royalejandro": (95.0, 97.0),
                 "test_dataset": (0.0, 97.0), "dimaga": (0.0, 97.0)}  # the issue's real-log targets, %
 
@@ -139,6 +147,49 @@ def fit_report(drives: dict, fitted: list, truth) -> str:
     return "\n".join(lines)
 
 
+def seen_truth_pct(seen, truth) -> float:
+    """Share of map_bw's floor cells among a drive's seen cells, %: no cell model can map more."""
+    return 100.0 * np.count_nonzero(seen & truth) / max(np.count_nonzero(truth), 1)
+
+
+def trade_scores(drive, truth, lines=TRADE_LINES):
+    """[MapScore per line]: the shipped cell model on one drive's (seen, X), its probability line moved."""
+    sw, sb, _ = shipped_weights()
+    return [score_map(model_map(*drive, sw, sb, p), truth * 255) for p in lines]
+
+
+def best_under(scores, floor_attr: str, floor: float, best_attr: str) -> float:
+    """Highest ``best_attr`` among the scores whose ``floor_attr`` reaches ``floor`` (nan if none does)."""
+    ok = [getattr(sc, best_attr) for sc in scores if getattr(sc, floor_attr) >= floor]
+    return max(ok) if ok else float("nan")
+
+
+def trade_report(drives: dict, truth, lines=TRADE_LINES) -> str:
+    """Markdown: mapped / fidelity per drive at each probability line of the shipped model, then per drive the
+    seen share of the floor and the best mapped (fidelity) each fidelity (mapped) line leaves."""
+    scores = {n: trade_scores(drives[n], truth, lines) for n in drives}
+    fine = {n: trade_scores(drives[n], truth, TRADE_FINE_LINES) for n in drives}
+    names = list(drives)
+    shipped = perception.SCORED_CELL_MIN_P
+    lines_md = ["mapped / fidelity % of the shipped cell model as its probability line moves (* = shipped line)", "",
+                "| line | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for i, p in enumerate(lines):
+        mark = "*" if abs(p - shipped) < 1e-9 else ""
+        cells = " | ".join(f"{scores[n][i].mapped_pct:.2f} / {scores[n][i].fidelity_pct:.2f}" for n in names)
+        lines_md.append(f"| {p:.3f}{mark} | {cells} |")
+    fid_cols = [f"most mapped at fidelity >= {f:g}" for f in TRADE_FIDELITY_FLOORS]
+    map_cols = [f"best fidelity at mapped >= {m:g}" for m in TRADE_MAPPED_FLOORS]
+    lines_md += ["", "| drive | floor seen at all | " + " | ".join(fid_cols + map_cols) + " |",
+                 "|---|---|" + "---|" * (len(fid_cols) + len(map_cols))]
+    for n in names:
+        row = [f"{best_under(fine[n], 'fidelity_pct', f, 'mapped_pct'):.2f}" for f in TRADE_FIDELITY_FLOORS]
+        row += [f"{best_under(fine[n], 'mapped_pct', m, 'fidelity_pct'):.2f}" for m in TRADE_MAPPED_FLOORS]
+        lines_md.append(f"| {n} | {seen_truth_pct(drives[n][0], truth):.2f} | " + " | ".join(row) + " |")
+    lines_md += ["", f"Summary over lines {TRADE_FINE_LINES[0]:g}-{TRADE_FINE_LINES[-1]:g} in steps of "
+                     f"{TRADE_FINE_LINES[1] - TRADE_FINE_LINES[0]:g}; nan: no line reaches it."]
+    return "\n".join(lines_md)
+
+
 def log_spec(text: str):
     """``NAME=PATH`` -> (name, path); the name becomes a file stem, so it may not hold a path separator."""
     name, sep, path = text.partition("=")
@@ -197,7 +248,8 @@ def _run_twin(seed, shadows, fps, latency_ms, path) -> None:
                   timing=Timing(fps=fps, latency_ms=latency_ms))
 
 
-def _fit(args) -> int:
+def _load_drives(args):
+    """(truth, {stem: (seen, X)}) for the .npz files in args.dir; a clear exit when they cannot be read."""
     from evaluation.metrics import load_ground_truth
     import shared_data
 
@@ -209,9 +261,19 @@ def _fit(args) -> int:
     if not files:
         raise SystemExit(f"no .npz map-votes files in {args.dir} (run the collect command first)")
     try:
-        drives = {f.stem: cell_table(load_memory(f)) for f in files}
+        return truth, {f.stem: cell_table(load_memory(f)) for f in files}
     except (OSError, ValueError) as exc:
         raise SystemExit(f"cannot read the map votes in {args.dir}: {exc}")
+
+
+def _trade(args) -> int:
+    truth, drives = _load_drives(args)
+    print(trade_report(drives, truth))
+    return 0
+
+
+def _fit(args) -> int:
+    truth, drives = _load_drives(args)
     missing = [n for n in args.fit if n not in drives]
     if missing:
         raise SystemExit(f"not in {args.dir}: {', '.join(missing)}")
@@ -234,8 +296,11 @@ def main(argv=None) -> int:
     f.add_argument("dir", help="folder of .npz files from collect")
     f.add_argument("--fit", nargs="+", required=True, metavar="NAME", help="drives (file stems) to fit on")
     f.add_argument("--truth", help="ground-truth map (default: map_bw.png in ../shared)")
+    t = sub.add_parser("trade", help="mapped against fidelity per drive as the shipped model's probability line moves")
+    t.add_argument("dir", help="folder of .npz files from collect")
+    t.add_argument("--truth", help="ground-truth map (default: map_bw.png in ../shared)")
     args = parse_with_logging(p, argv)
-    return _collect(args) if args.cmd == "collect" else _fit(args)
+    return {"collect": _collect, "fit": _fit, "trade": _trade}[args.cmd](args)
 
 
 if __name__ == "__main__":

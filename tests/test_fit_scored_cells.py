@@ -59,6 +59,50 @@ def test_collect_and_fit_on_a_real_log(tmp_path, test_dataset_dir, ground_truth_
     assert rows[float(best)] == min(rows.values())
     with pytest.raises(SystemExit, match="not in"):
         F.main(["fit", str(tmp_path), "--fit", "nope", "--truth", str(ground_truth_path)])
+    assert F.main(["trade", str(tmp_path), "--truth", str(ground_truth_path)]) == 0
+    out = capsys.readouterr().out
+    assert f"| {P.SCORED_CELL_MIN_P:.3f}* |" in out  # the shipped line is marked
+    seen_floor = float(re.search(r"^\| td \| ([0-9.]+) \|", out, re.M).group(1))
+    assert 15 < seen_floor < 40  # the 282-frame drive sees about a quarter of the canyon
+
+
+def _drive_with_known_truth():
+    """(seen, X) of a random drive and a truth map on which its cells' light share tells floor from wall."""
+    rng = np.random.default_rng(5)
+    mem = P.PerceptionMemory()
+    truth = np.zeros(mem.nav_votes.shape, bool)
+    truth[50:150, 60:140] = True
+    light = np.where(truth, rng.uniform(0.3, 1.0, truth.shape), rng.uniform(0.0, 0.5, truth.shape))
+    votes = rng.uniform(5, 15, truth.shape) * (rng.random(truth.shape) < 0.8)
+    mem.nav_votes[...], mem.obs_votes[...] = votes * light, votes * (1 - light)
+    return F.cell_table(mem), truth
+
+
+def test_the_trade_maps_more_and_less_truly_as_the_line_falls():
+    drive, truth = _drive_with_known_truth()
+    scores = F.trade_scores(drive, truth)
+    mapped = [sc.mapped_pct for sc in scores]
+    fidelity = [sc.fidelity_pct for sc in scores]
+    assert mapped == sorted(mapped, reverse=True) and mapped[0] > mapped[-1]  # lines run from 0.05 upward
+    assert fidelity[0] < fidelity[-1]
+    ceiling = F.seen_truth_pct(drive[0], truth)
+    assert 75 < ceiling < 85 and max(mapped) <= ceiling  # 80 % of cells seen; nothing unseen can be mapped
+    report = F.trade_report({"synthetic": drive}, truth)
+    row = re.search(r"^\| synthetic \| ([0-9.]+) \| ([0-9.na]+) \| ([0-9.na]+) \| ([0-9.na]+) \| ([0-9.na]+) \|$",
+                    report, re.M).groups()
+    assert float(row[0]) == pytest.approx(ceiling, abs=0.01)
+    fine = F.trade_scores(drive, truth, F.TRADE_FINE_LINES)
+    at_96 = max(sc.mapped_pct for sc in fine if sc.fidelity_pct >= 96)
+    assert float(row[1]) == pytest.approx(at_96, abs=0.01) and at_96 >= max(m for m, f in zip(mapped, fidelity) if f >= 96)
+
+
+def test_best_under_reads_only_lines_that_reach_the_floor():
+    from evaluation.metrics import MapScore
+
+    scores = [MapScore(98.5, 93.0, 0, 0, 0, 0), MapScore(96.0, 96.5, 0, 0, 0, 0), MapScore(94.0, 98.0, 0, 0, 0, 0)]
+    assert F.best_under(scores, "fidelity_pct", 96.0, "mapped_pct") == 96.0
+    assert F.best_under(scores, "mapped_pct", 95.0, "fidelity_pct") == 96.5
+    assert np.isnan(F.best_under(scores, "mapped_pct", 99.0, "fidelity_pct"))
 
 
 @pytest.mark.parametrize("argv", [["collect", "--log", "no-name-given", "--out", "X"],
