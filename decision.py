@@ -46,7 +46,7 @@ import numpy as np
 import perception
 from interrupts import reraise_interrupt
 from navigation import (approach, exploration_plan, explore, fixed_turn, grid, paths, predict, pursuit, reactive,
-                        rock_choice, search_plan, stuck, turning)
+                        rock_choice, sample_spots, search_plan, stuck, turning)
 
 log = logging.getLogger(__name__)
 
@@ -186,6 +186,11 @@ class NavMemory:
         self.search_began = None  # (t, (x, y)) when and where the sample search first planned, or None
         self.pocket_goal = None  # bool map of the faint pocket the search's current pocket goal drives into (search_plan._pocket_goal), or None
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
+        self.spots = None  # (n, 2) world (x, y) of the sample spots this mission can hold (navigation.sample_spots), set at the first search plan
+        self.spot_done = None  # bool (n,): spots checked (seen from close, faced from their stand, held a collected sample, or given up)
+        self.spot_goal = None  # index of the spot the search's "spot" goal is the stand of, or None
+        self.spot_faced = None  # the spot index the rover last turned at its stand to face
+        self.spot_hold_until = None  # ...and until when it holds still facing it, s
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
         self.fixed = None  # the fixed_turn.FixedTurn in flight, or None
         self.fixed_steer = False  # this turn in place is steered: its fixed turn was refused
@@ -820,7 +825,11 @@ def mode_search(rover, nav, s):
             return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
         if kind in SEARCH_FACE_KINDS and _face_unsearched(rover, nav, s, goal, frame_maps):
             return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
-        if kind == "look":
+        if kind == "spot" and _face_spot(nav, s):
+            return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+        if kind == "spot":
+            search_plan.spot_done(nav, s)
+        elif kind == "look":
             search_plan.leave_look_stand(rover, nav, s, goal, frame_maps)
         elif kind == "pocket":
             search_plan.pocket_done(nav, goal)
@@ -830,6 +839,24 @@ def mode_search(rover, nav, s):
     # goals under the rover's wheels were ticked off; the next frame plans on (an empty path here
     # once sent seed 15 home with two samples missing)
     return Command(0.0, BRAKE_STOP if abs(s.vel) > STOPPED_SPEED_MPS else 0.0, 0.0)
+
+
+def _face_spot(nav, s):
+    """At a reached spot stand, turn once to face the spot, then hold still for sample_spots.SPOT_HOLD_S so
+    the camera's frames show it (a rock there becomes the target); True while turning or holding."""
+    if nav.spot_goal is None or nav.spots is None:
+        return False
+    if nav.spot_faced != nav.spot_goal:
+        nav.spot_faced, nav.spot_hold_until = nav.spot_goal, None
+        heading = sample_spots.face_heading(nav.spots[nav.spot_goal], s.pos, s.yaw)
+        if heading is not None:
+            log.info("sample search: facing spot %d (%.1f, %.1f) at %.0f deg, t=%.1f", nav.spot_goal,
+                     *nav.spots[nav.spot_goal], heading, s.t)
+            _start_rotation(nav, s, heading, "spot-face")
+            return True
+    if nav.spot_hold_until is None:
+        nav.spot_hold_until = s.t + sample_spots.SPOT_HOLD_S
+    return s.t < nav.spot_hold_until
 
 
 def _face_unsearched(rover, nav, s, goal, frame_maps=None):

@@ -1,6 +1,8 @@
 """The sample search's planning: which place to visit next once the map is complete and samples are missing.
 
-Four kinds of goal compete, nearest by path first (explore.nearer_search_goal): a peek into shadowed
+On the real canyon the search first drives to the sample spots the camera has not seen from close
+(navigation.sample_spots: the only places the simulator puts samples), nearest first. Elsewhere, or once
+they are all checked, four kinds of goal compete, nearest by path first (explore.nearer_search_goal): a peek into shadowed
 floor the camera never saw from close, mapped floor far from the trail, a stand facing wall feet
 the camera never saw from close (nooks), and the way into a faint pocket (a slot whose floor in deep
 shadow was voted wall). The search keeps its goal against flip-flops, ticks places off
@@ -14,11 +16,11 @@ import math
 import numpy as np
 
 import perception
-from navigation import astar, explore, grid, paths
+from navigation import astar, explore, grid, paths, sample_spots
 
 log = logging.getLogger(__name__)
 
-SEARCH_GOAL_KINDS = ("peek", "search", "look", "pocket")  # path goals of the sample search: pocket peek, far floor, unsearched wall feet, faint pocket
+SEARCH_GOAL_KINDS = ("spot", "peek", "search", "look", "pocket")  # path goals of the sample search: a sample spot's stand, pocket peek, far floor, unsearched wall feet, faint pocket
 SEARCH_KEEP_MARGIN_M = 6.0  # a look or far-floor goal still open is kept unless another is this much cheaper (explore.search_cost), m
 SEARCH_COMMIT_M = 3.0  # a search goal still open is kept until the rover has driven this far from where it chose it (a turn away from an arm's tip revealed new wall feet there and the rover turned back, twice: seed 7), m
 SEARCH_LOCAL_M = 15.0  # while pockets come first (SEARCH_POCKETS_FIRST_S), goals this close (straight line) to where the search began come before them: finishing where the rover stands costs less than coming back, m
@@ -44,6 +46,13 @@ def plan_search(rover, nav, s, frame_maps=None):
     visited = nav.visits.visited()
     if nav.search_began is None:
         nav.search_began = (s.t, s.pos)
+    spot = _spot_goal(rover, nav, s, free, dist)
+    if spot is not None:
+        if nav.path_goal != ("spot", spot):
+            log.info("sample search: spot %d (%.1f, %.1f) from its stand %s, from (%.1f, %.1f), t=%.1f", nav.spot_goal,
+                     *nav.spots[nav.spot_goal], spot, s.pos[0], s.pos[1], s.t)
+        paths.set_path(nav, s, "spot", spot, astar.path_to(parent, cost.shape, spot))
+        return
     candidates = {"peek": _peek_goal(rover, nav, s, free, dist),
                   "search": explore.search_target(free, visited, nav.search_done, dist, s.pos, s.yaw),
                   "look": explore.nearest_target(explore.look_targets(unsearched, free, visited, nav.look_done, dist,
@@ -63,6 +72,42 @@ def plan_search(rover, nav, s, frame_maps=None):
     if nav.path_goal != (kind, goal):
         log.info("sample search: %s at %s from (%.1f, %.1f), t=%.1f", kind, goal, s.pos[0], s.pos[1], s.t)
     paths.set_path(nav, s, kind, goal, astar.path_to(parent, cost.shape, goal))
+
+
+def _spot_goal(rover, nav, s, free, dist):
+    """The stand (row, col) of the sample spot to check next (the current one while it is still open, else the
+    cheapest by explore.search_cost), setting nav.spot_goal; None when no open spot has a reachable stand."""
+    if nav.spots is None:
+        nav.spots = sample_spots.spots_for_start(nav.home)
+        nav.spot_done = np.zeros(len(nav.spots), bool)
+        if len(nav.spots):
+            log.info("sample search: the canyon's %d sample spots are checked first", len(nav.spots))
+    if len(nav.spots) == 0:
+        return None
+    seen = perception.looked_at_within(rover, sample_spots.SPOT_CHECK_M) & nav.in_sight
+    nav.spot_done |= sample_spots.checked_spots(nav.spots, seen, nav.collected)
+    stands = sample_spots.spot_stands(nav.spots, free, dist)
+    usable = ~nav.spot_done & (stands[:, 2] == 1)
+    if not usable.any():
+        nav.spot_goal = None
+        return None
+    current = nav.path_goal is not None and nav.path_goal[0] == "spot"
+    if current and nav.spot_goal is not None and usable[nav.spot_goal]:
+        k = nav.spot_goal
+    else:
+        idx = np.nonzero(usable)[0]
+        costs = explore.search_cost(stands[idx, 0], stands[idx, 1], dist[stands[idx, 0], stands[idx, 1]], s.pos, s.yaw)
+        k = int(idx[int(np.argmin(costs))])
+    nav.spot_goal = k
+    return int(stands[k, 0]), int(stands[k, 1])
+
+
+def spot_done(nav, s):
+    """The search's current sample spot is checked (faced from its stand, or given up): not driven to again."""
+    if nav.spot_goal is not None and nav.spot_done is not None:
+        nav.spot_done[nav.spot_goal] = True
+        log.info("sample search: spot %d checked, t=%.1f", nav.spot_goal, s.t)
+    nav.spot_goal = None
 
 
 def keep_search_goal(nav, s, chosen, dist, free, unsearched):
@@ -211,7 +256,9 @@ def give_up_search_goal_near(nav, s):
     if goal is None:
         return
     kind = nav.path_goal[0]
-    if kind == "pocket":
+    if kind == "spot":
+        spot_done(nav, s)
+    elif kind == "pocket":
         pocket_done(nav, goal)  # many are a shaded slope, not a slot (seed 17, shadows on: 40 s stuck on one)
     else:
         explore.ignore_disc(nav.look_done if kind == "look" else nav.search_done, goal, search_done_radius(kind))
