@@ -826,7 +826,7 @@ def mode_search(rover, nav, s):
         if kind in SEARCH_FACE_KINDS and _face_unsearched(rover, nav, s, goal, frame_maps):
             return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
         if kind == "spot" and _face_spot(nav, s):
-            return mode_stop(nav, s) or Command(0.0, BRAKE_STOP, 0.0)
+            return (mode_stop(nav, s) if nav.rotate_heading is not None else None) or Command(0.0, BRAKE_STOP, 0.0)
         if kind == "spot":
             search_plan.spot_done(nav, s)
         elif kind == "look":

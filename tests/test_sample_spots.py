@@ -1,0 +1,104 @@
+"""The canyon's sample spots: used only on the canyon, ruled out by looks and collections, reached from floor."""
+import math
+
+import numpy as np
+import pytest
+
+import decision
+from navigation import grid, sample_spots as S, search_plan
+from rover_state import RoverState
+
+
+def test_the_spots_are_the_canyons_only_when_the_mission_starts_at_its_start():
+    assert len(S.spots_for_start(S.CANYON_START_XY)) == 33
+    assert len(S.spots_for_start((S.CANYON_START_XY[0] + 0.6, S.CANYON_START_XY[1] - 0.6))) == 33
+    assert len(S.spots_for_start((100.0, 100.0))) == 0  # a procedural world starts elsewhere
+    assert len(S.spots_for_start((float("nan"), 85.0))) == 0
+    assert len(S.spots_for_start(None)) == 0 and len(S.spots_for_start(("x", 1))) == 0
+    assert len(S.spots_for_start(S.CANYON_START_XY, enabled=False)) == 0
+
+
+def test_the_spots_lie_in_the_canyon_around_its_start():
+    spots = S.CANYON_SPOTS
+    assert spots.shape == (33, 2) and len({tuple(p) for p in spots}) == 33
+    assert (spots > 0).all() and (spots < grid.GRID_SIZE).all()
+    far = np.hypot(spots[:, 0] - S.CANYON_START_XY[0], spots[:, 1] - S.CANYON_START_XY[1])
+    assert far.min() > 5 and far.max() < 120  # none on the start, all within the canyon's arms
+
+
+def test_a_spot_is_checked_by_a_close_look_or_a_collected_sample_beside_it():
+    spots = np.array([(10.4, 20.7), (50.2, 60.9), (80.0, 80.0)])
+    seen = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
+    seen[20, 10] = True  # row = y, col = x
+    done = S.checked_spots(spots, seen, collected=[(51.0, 62.0)])
+    assert done.tolist() == [True, True, False]
+    assert S.checked_spots(np.zeros((0, 2)), seen).shape == (0,)
+
+
+def _corridor():
+    """A floor corridor y 50-52 from x 40 to 70, every cell reachable (dist = path length from x 40)."""
+    free = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
+    free[50:53, 40:71] = True
+    dist = np.where(free, np.arange(grid.GRID_SIZE)[None, :] - 40.0, np.inf)
+    return free, dist
+
+
+def test_a_spots_stand_is_the_nearest_reachable_floor_within_reach():
+    free, dist = _corridor()
+    spots = np.array([(60.5, 54.5), (55.5, 51.5), (60.5, 59.5), (90.5, 51.5)])
+    stands = S.spot_stands(spots, free, dist)
+    assert tuple(stands[0]) == (52, 60, 1)  # beside the wall foot 2 m north of the corridor
+    assert tuple(stands[1]) == (51, 55, 1)  # on floor: the spot's own cell
+    assert stands[2, 2] == 0  # 7 m from any floor
+    assert stands[3, 2] == 0  # 20 m past the corridor's end
+    dist[52, 60] = np.inf  # that cell cannot be reached: the next nearest can
+    assert tuple(S.spot_stands(spots[:1], free, dist)[0]) in {(52, 59, 1), (52, 61, 1)}
+
+
+def test_the_rover_turns_to_face_a_spot_unless_it_already_does():
+    assert S.face_heading((10.0, 0.0), (0.0, 0.0), 0.0) is None
+    assert S.face_heading((0.0, 10.0), (0.0, 0.0), 0.0) == pytest.approx(90.0)
+    assert S.face_heading((-5.0, 0.0), (0.0, 0.0), 170.0) is None  # 10 deg off: within the tolerance
+    assert S.face_heading((0.2, 0.1), (0.0, 0.0), 0.0) is None  # standing on it
+
+
+def _searching_rover(pos, home):
+    """A rover whose map is complete with one sample missing, on a corridor of floor around ``pos``."""
+    r = RoverState()
+    r.pos, r.yaw, r.total_time, r.vel = pos, 0.0, 600.0, 0.0
+    r.samples_remaining = 1
+    wm = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE, 3), np.uint8)
+    wm[:, :, 0] = 255
+    wm[int(pos[1]) - 1:int(pos[1]) + 2, int(pos[0]) - 2:int(pos[0]) + 25] = (0, 0, 255)
+    r.worldmap = wm
+    r.nav = decision.NavMemory()
+    r.nav.home, r.nav.explored = home, True
+    return r
+
+
+def test_on_the_canyon_the_search_drives_to_an_unchecked_spot_first(monkeypatch):
+    spot = (20.0, 101.0)  # the west tip's spot (21.72, 102.18) region; the rover stands 12 m east of it
+    monkeypatch.setattr(S, "CANYON_SPOTS", np.array([spot, (150.0, 150.0)]))
+    r = _searching_rover((8.5, 101.5), S.CANYON_START_XY)
+    search_plan.plan_search(r, r.nav, decision._read_inputs(r))
+    assert r.nav.path_goal is not None and r.nav.path_goal[0] == "spot"
+    row, col = r.nav.path_goal[1]
+    assert math.hypot(col + 0.5 - spot[0], row + 0.5 - spot[1]) < 1.0 and r.nav.spot_goal == 0
+    elsewhere = _searching_rover((8.5, 101.5), (100.0, 100.0))  # a procedural world: no spots
+    search_plan.plan_search(elsewhere, elsewhere.nav, decision._read_inputs(elsewhere))
+    assert len(elsewhere.nav.spots) == 0 and elsewhere.nav.path_goal[0] != "spot"
+
+
+def test_a_reached_spot_is_faced_held_then_checked(monkeypatch):
+    monkeypatch.setattr(S, "CANYON_SPOTS", np.array([(12.0, 103.5)]))  # 2 m north of the stand
+    r = _searching_rover((11.5, 101.5), S.CANYON_START_XY)
+    search_plan.plan_search(r, r.nav, decision._read_inputs(r))
+    assert r.nav.path_goal[0] == "spot"
+    decision.mode_search(r, r.nav, decision._read_inputs(r))
+    assert r.nav.rotate_heading == pytest.approx(90.0, abs=15.0)  # the turn to face it
+    r.nav.rotate_heading, r.yaw = None, 90.0  # the turn is done
+    decision.mode_search(r, r.nav, decision._read_inputs(r))
+    assert not r.nav.spot_done[0]  # holding still: the camera gets its frames
+    r.total_time += S.SPOT_HOLD_S + 0.1
+    decision.mode_search(r, r.nav, decision._read_inputs(r))
+    assert r.nav.spot_done[0] and r.nav.spot_goal is None
