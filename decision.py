@@ -186,7 +186,8 @@ class NavMemory:
         self.search_began = None  # (t, (x, y)) when and where the sample search first planned, or None
         self.pocket_goal = None  # bool map of the faint pocket the search's current pocket goal drives into (search_plan._pocket_goal), or None
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
-        self.spots = None  # (n, 2) world (x, y) of the sample spots this mission can hold (navigation.sample_spots), set at the first search plan
+        self.spots = None  # (n, 2) world (x, y) of the sample spots this mission can hold (navigation.sample_spots), set once home is known
+        self.spot_sight = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # cells a clear line of sight reached within sample_spots.SPOT_CHECK_M
         self.spot_done = None  # bool (n,): spots checked (seen from close, faced from their stand, held a collected sample, or given up)
         self.spot_goal = None  # index of the spot the search's "spot" goal is the stand of, or None
         self.spot_faced = None  # the spot index the rover last turned at its stand to face
@@ -379,6 +380,7 @@ def _update_memory(rover, nav, s):
             explore.mark_in_sight(nav.in_sight, getattr(rover, "worldmap", None), s.pos, s.yaw,
                                   explore.SEARCH_LOOK_M, perception.LOOK_HALF_ANGLE_DEG,
                                   _frame_reach(s))
+            _check_spots(rover, nav, s)
     # a pickup that just finished, or a sample count that dropped, means a collection
     finished = nav.was_picking and not s.picking_up
     dropped = (nav.last_remaining is not None and s.samples_remaining is not None
@@ -389,6 +391,19 @@ def _update_memory(rover, nav, s):
     nav.was_picking = s.picking_up
     if s.samples_remaining is not None:
         nav.last_remaining = s.samples_remaining
+
+
+def _check_spots(rover, nav, s):
+    """Rule out the sample spots (navigation.sample_spots) the camera has had in view from close, from the
+    mission's start on: the search later drives only to those still open."""
+    if nav.spots is None and nav.home is not None:
+        nav.spots = sample_spots.spots_for_start(nav.home)
+        nav.spot_done = np.zeros(len(nav.spots), bool)
+    if nav.spots is None or len(nav.spots) == 0 or nav.spot_done.all():
+        return
+    explore.mark_in_sight(nav.spot_sight, getattr(rover, "worldmap", None), s.pos, s.yaw, sample_spots.SPOT_CHECK_M,
+                          perception.LOOK_HALF_ANGLE_DEG, _frame_reach(s))
+    nav.spot_done |= sample_spots.checked_spots(nav.spots, nav.spot_sight, nav.collected)
 
 
 def _register_collection(nav, s):

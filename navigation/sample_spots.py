@@ -15,14 +15,14 @@ import math
 
 import numpy as np
 
-from navigation import explore, grid
+from navigation import grid
 
 USE_CANYON_SPOTS = True  # check the canyon's sample spots first when the mission starts at the canyon's start (False: map-only search)
 CANYON_START_XY = (99.67, 85.589)  # where the real simulator starts the rover, world (x, y) m (simulator facts, section 4)
 CANYON_START_MATCH_M = 1.0  # a mission whose first pose lies this close to it is on the real canyon, m
-SPOT_CHECK_M = explore.SEARCH_LOOK_M  # a spot is checked once its cell was in the camera's view from this close, with a clear line of sight, m
+SPOT_CHECK_M = 5.5  # a spot is checked once its cell was in the camera's look cone this close, along a clear line of sight (explore.mark_in_sight; a 0.15 m sample spans ~3 px there), m
 SPOT_TAKEN_M = 2.0  # a spot this close to a collected sample held that sample, m
-SPOT_STAND_REACH_M = 6.0  # the search drives to the reachable floor cell nearest a spot, if one lies this close to it, m
+SPOT_STAND_REACH_M = 8.0  # the search drives to the reachable floor cell nearest a spot, if one lies this close to it (a shadowed pocket voted wall runs ~7 m past its mouth: seed 17), m
 SPOT_FACE_TOLERANCE_DEG = 15.0  # at the stand, the rover turns to face the spot unless it already points within this, deg
 SPOT_HOLD_S = 0.6  # ...then holds still this long so the camera's frames show it before the spot counts as checked, s
 

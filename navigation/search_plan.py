@@ -49,8 +49,9 @@ def plan_search(rover, nav, s, frame_maps=None):
     spot = _spot_goal(rover, nav, s, free, dist)
     if spot is not None:
         if nav.path_goal != ("spot", spot):
-            log.info("sample search: spot %d (%.1f, %.1f) from its stand %s, from (%.1f, %.1f), t=%.1f", nav.spot_goal,
-                     *nav.spots[nav.spot_goal], spot, s.pos[0], s.pos[1], s.t)
+            log.info("sample search: spot %d (%.1f, %.1f) from its stand %s, from (%.1f, %.1f), %d open, t=%.1f",
+                     nav.spot_goal, *nav.spots[nav.spot_goal], spot, s.pos[0], s.pos[1],
+                     np.count_nonzero(~nav.spot_done), s.t)
         paths.set_path(nav, s, "spot", spot, astar.path_to(parent, cost.shape, spot))
         return
     candidates = {"peek": _peek_goal(rover, nav, s, free, dist),
@@ -84,8 +85,7 @@ def _spot_goal(rover, nav, s, free, dist):
             log.info("sample search: the canyon's %d sample spots are checked first", len(nav.spots))
     if len(nav.spots) == 0:
         return None
-    seen = perception.looked_at_within(rover, sample_spots.SPOT_CHECK_M) & nav.in_sight
-    nav.spot_done |= sample_spots.checked_spots(nav.spots, seen, nav.collected)
+    nav.spot_done |= sample_spots.checked_spots(nav.spots, nav.spot_sight, nav.collected)
     stands = sample_spots.spot_stands(nav.spots, free, dist)
     usable = ~nav.spot_done & (stands[:, 2] == 1)
     if not usable.any():

@@ -45,11 +45,11 @@ def _corridor():
 
 def test_a_spots_stand_is_the_nearest_reachable_floor_within_reach():
     free, dist = _corridor()
-    spots = np.array([(60.5, 54.5), (55.5, 51.5), (60.5, 59.5), (90.5, 51.5)])
+    spots = np.array([(60.5, 54.5), (55.5, 51.5), (60.5, 61.5), (90.5, 51.5)])
     stands = S.spot_stands(spots, free, dist)
     assert tuple(stands[0]) == (52, 60, 1)  # beside the wall foot 2 m north of the corridor
     assert tuple(stands[1]) == (51, 55, 1)  # on floor: the spot's own cell
-    assert stands[2, 2] == 0  # 7 m from any floor
+    assert stands[2, 2] == 0  # 9 m from any floor
     assert stands[3, 2] == 0  # 20 m past the corridor's end
     dist[52, 60] = np.inf  # that cell cannot be reached: the next nearest can
     assert tuple(S.spot_stands(spots[:1], free, dist)[0]) in {(52, 59, 1), (52, 61, 1)}
