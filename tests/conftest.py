@@ -35,3 +35,12 @@ def world_dir():
 @pytest.fixture(scope="session")
 def real_logs_dir():
     return _require(shared_data.real_logs_dir(), "real recorded logs")
+
+
+@pytest.fixture
+def map_only_search(monkeypatch):
+    """The sample search as on any world but the real canyon: no sample spots (navigation.sample_spots), so tests
+    of the map-only search rules can stand a rover near the canyon's start."""
+    from navigation import sample_spots
+
+    monkeypatch.setattr(sample_spots, "USE_CANYON_SPOTS", False)

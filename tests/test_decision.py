@@ -8,6 +8,8 @@ import decision
 from navigation import exploration_plan, explore, paths, search_plan
 from rover_state import RoverState
 
+pytestmark = pytest.mark.usefixtures("map_only_search")  # these rules are the map-only search's
+
 DT = 0.04  # twin telemetry period, s
 
 

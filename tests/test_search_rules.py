@@ -3,10 +3,13 @@ until the rover has driven away from where it chose it (search_plan.search_goal_
 import math
 
 import numpy as np
+import pytest
 
 import decision
 from navigation import paths, search_plan, vanished
 from tests.test_decision import make_rover
+
+pytestmark = pytest.mark.usefixtures("map_only_search")  # these rules are the map-only search's
 
 
 def neck_map():
