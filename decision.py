@@ -187,7 +187,6 @@ class NavMemory:
         self.pocket_goal = None  # bool map of the faint pocket the search's current pocket goal drives into (search_plan._pocket_goal), or None
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
         self.spots = None  # (n, 2) world (x, y) of the sample spots this mission can hold (navigation.sample_spots), set once home is known
-        self.spot_sight = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # cells a clear line of sight reached within sample_spots.SPOT_CHECK_M
         self.spot_done = None  # bool (n,): spots checked (seen from close, faced from their stand, held a collected sample, or given up)
         self.spot_goal = None  # index of the spot the search's "spot" goal is the stand of, or None
         self.spot_faced = None  # the spot index the rover last turned at its stand to face
@@ -394,16 +393,15 @@ def _update_memory(rover, nav, s):
 
 
 def _check_spots(rover, nav, s):
-    """Rule out the sample spots (navigation.sample_spots) the camera has had in view from close, from the
-    mission's start on: the search later drives only to those still open."""
+    """Rule out the sample spots (navigation.sample_spots) the camera has faced from where they show, and those
+    that held a collected sample, from the mission's start on: the search later drives only to those still open."""
     if nav.spots is None and nav.home is not None:
         nav.spots = sample_spots.spots_for_start(nav.home)
         nav.spot_done = np.zeros(len(nav.spots), bool)
     if nav.spots is None or len(nav.spots) == 0 or nav.spot_done.all():
         return
-    explore.mark_in_sight(nav.spot_sight, getattr(rover, "worldmap", None), s.pos, s.yaw, sample_spots.SPOT_CHECK_M,
-                          perception.LOOK_HALF_ANGLE_DEG, _frame_reach(s))
-    nav.spot_done |= sample_spots.checked_spots(nav.spots, nav.spot_sight, nav.collected)
+    nav.spot_done |= sample_spots.in_view(nav.spots, s.pos, s.yaw, sample_spots.VIEWS)
+    nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
 
 
 def _register_collection(nav, s):
@@ -834,8 +832,9 @@ def mode_search(rover, nav, s):
             return None
         kind, goal = nav.path_goal
         goal_xy = grid.cell_to_world(*goal)
+        near_m = sample_spots.SPOT_STAND_REACHED_M if kind == "spot" else exploration_plan.FRONTIER_REACHED_M
         reached = (len(nav.path_xy) < 2 or paths.goal_stalled(nav, s)
-                   or math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < exploration_plan.FRONTIER_REACHED_M)
+                   or math.hypot(goal_xy[0] - s.pos[0], goal_xy[1] - s.pos[1]) < near_m)
         if not reached:
             return _follow_path(nav, s, CRUISE_SPEED_MPS, slow_at_end=False)
         if kind in SEARCH_FACE_KINDS and _face_unsearched(rover, nav, s, goal, frame_maps):

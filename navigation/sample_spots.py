@@ -4,27 +4,41 @@ Why: the simulator spawns its six samples at 6 of 33 fixed points (its `Objectiv
 scene's `Objectives`; ../shared/docs/simulator-facts.md section 3). Without them the sample search had to look
 at every wall foot the camera had not seen from close, and a mission that saw five samples while exploring
 spent up to four minutes of search on the sixth (seed 17, shadows on: 245 s, then home without it). With
-them, the search drives only to the spots the camera has not yet seen from close, nearest first.
+them, the search drives only to the spots the camera has not yet faced from close, nearest first. A spot counts
+as seen only from where the camera really shows it: a rock smaller than a map cell, or a slot's wall, hides some
+spots from all but a few bearings (the east nook: 120-170 deg, up to 3.5 m), so the client ships a table of the
+places each spot shows from (spot_views.json, rendered by ``python -m sim.spot_views``) and the search's stand for
+a spot is one of them.
 
 The spots belong to the real canyon. They are used only when the mission starts where the real simulator
 starts every rover (`CANYON_START_XY`); anywhere else (the twin's procedural worlds, a changed scene) the
 search works as before, from the map alone. When every spot is checked and samples are still missing (a
 sample the camera missed, a scene that moved them), the map-only search takes over.
 """
+import json
+import logging
 import math
+from pathlib import Path
 
 import numpy as np
 
 from navigation import grid
 
+log = logging.getLogger(__name__)
+
 USE_CANYON_SPOTS = True  # check the canyon's sample spots first when the mission starts at the canyon's start (False: map-only search)
 CANYON_START_XY = (99.67, 85.589)  # where the real simulator starts the rover, world (x, y) m (simulator facts, section 4)
 CANYON_START_MATCH_M = 1.0  # a mission whose first pose lies this close to it is on the real canyon, m
-SPOT_CHECK_M = 5.5  # a spot is checked once its cell was in the camera's look cone this close, along a clear line of sight (explore.mark_in_sight; a 0.15 m sample spans ~3 px there), m
+SPOT_CHECK_M = 4.5  # a spot is checked once the camera faced it from this close (a scale-0.43 sample shows ~6 px at 4-5 m, 1 px at 5-6 m: docs/twin-realism.md round 9), m
+SPOT_CHECK_HALF_DEG = 30.0  # ...within this angle of the heading (the camera's half-width is ~54 deg; a blob at the edge is cut off), deg
+SPOT_VIEW_SLACK_M = 1.0  # ...and no more than this beyond the farthest range spot_views.json shows it from at that bearing, m
 SPOT_TAKEN_M = 2.0  # a spot this close to a collected sample held that sample, m
-SPOT_STAND_REACH_M = 8.0  # the search drives to the reachable floor cell nearest a spot, if one lies this close to it (a shadowed pocket voted wall runs ~7 m past its mouth: seed 17), m
+SPOT_STAND_MIN_M = 2.5  # the search's stand for a spot lies at least this far from it where a view allows (nearer, the rover noses into the wall foot), m
+SPOT_STAND_REACH_M = 8.0  # without a view table: the reachable floor cell nearest the spot, if this close to it, m
+SPOT_STAND_REACHED_M = 1.0  # a stand counts as reached this close (a view a few metres off a bearing window may hide the sample), m
 SPOT_FACE_TOLERANCE_DEG = 15.0  # at the stand, the rover turns to face the spot unless it already points within this, deg
 SPOT_HOLD_S = 0.6  # ...then holds still this long so the camera's frames show it before the spot counts as checked, s
+VIEWS_PATH = Path(__file__).resolve().parent / "spot_views.json"  # from where the twin's camera shows each spot (python -m sim.spot_views)
 
 CANYON_SPOTS = np.array([
     (97.44, 74.65), (104.56, 80.78), (109.78, 89.84), (113.27, 12.97), (122.28, 51.66), (109.00, 101.96),
@@ -60,38 +74,119 @@ def spot_cells(spots) -> np.ndarray:
     return np.stack([rows, cols], 1)
 
 
-def checked_spots(spots, seen_close, collected=()) -> np.ndarray:
-    """bool (n,): spots ruled out by the map alone: the camera saw the spot's cell from close (``seen_close``,
-    a bool map of cells in view within SPOT_CHECK_M along a clear line of sight), or a collected sample
-    lay within SPOT_TAKEN_M of it."""
+class SpotViews:
+    """From where the camera shows each spot: per spot and bearing (from the spot to the camera, every
+    ``step_deg``), the farthest range the twin's JPEG shows a sample from (0: never, a rock or wall hides it)."""
+
+    def __init__(self, step_deg: float, ranges_m, shown: np.ndarray):
+        self.step_deg = float(step_deg)
+        self.ranges_m = np.asarray(ranges_m, float)
+        self.shown = np.asarray(shown, bool)  # (n spots, n bearings, n ranges)
+        far = np.where(self.shown, self.ranges_m[None, None, :], 0.0)
+        self.farthest = far.max(axis=2)  # (n spots, n bearings), m
+
+    def bearing_bin(self, bearing_deg):
+        return np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.shown.shape[1]
+
+
+def load_views(path=None, spots=None):
+    """The SpotViews of ``path`` (spot_views.json) for ``spots`` (the canyon's), or None, logged, when the file is
+    missing, unreadable or written for other spots: the search then checks spots by range and heading alone."""
+    path = VIEWS_PATH if path is None else Path(path)
+    spots = CANYON_SPOTS if spots is None else np.asarray(spots, float)
+    try:
+        data = json.loads(Path(path).read_text())
+        xy = np.array([(e["x"], e["y"]) for e in data["spots"]], float)
+        shown = np.array([[[c == "1" for c in row] for row in e["views"]] for e in data["spots"]], bool)
+        if xy.shape != spots.shape or np.abs(xy - spots).max() > 0.05 or shown.ndim != 3:
+            raise ValueError("written for other spots")
+        if shown.shape[1] * float(data["bearing_step_deg"]) != 360.0 or shown.shape[2] != len(data["ranges_m"]):
+            raise ValueError("bearings or ranges do not match the table")
+        return SpotViews(data["bearing_step_deg"], data["ranges_m"], shown)
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.warning("no spot views from %s (%s): spots count as checked by range and heading alone", path, exc)
+        return None
+
+
+def in_view(spots, pos, yaw_deg, views=None) -> np.ndarray:
+    """bool (n,): spots the camera shows from ``pos`` facing ``yaw_deg``: within SPOT_CHECK_HALF_DEG of the heading,
+    no farther than SPOT_CHECK_M and, with ``views``, than SPOT_VIEW_SLACK_M past the farthest range the table shows
+    the spot from at this bearing (never where a rock or wall hides it)."""
     spots = np.asarray(spots, float).reshape(-1, 2)
-    if len(spots) == 0:
-        return np.zeros(0, bool)
-    cells = spot_cells(spots)
-    done = np.asarray(seen_close, bool)[cells[:, 0], cells[:, 1]].copy()
+    if len(spots) == 0 or pos is None or not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
+        return np.zeros(len(spots), bool)
+    dx, dy = pos[0] - spots[:, 0], pos[1] - spots[:, 1]
+    dist = np.hypot(dx, dy)
+    ahead = np.degrees(np.arctan2(-dy, -dx))  # from the rover to the spot
+    off = np.abs((ahead - yaw_deg + 180.0) % 360.0 - 180.0)
+    ok = (off <= SPOT_CHECK_HALF_DEG) & (dist <= SPOT_CHECK_M)
+    if views is not None and views.shown.shape[0] == len(spots):
+        bins = views.bearing_bin(np.degrees(np.arctan2(dy, dx)) % 360.0)
+        farthest = views.farthest[np.arange(len(spots)), bins]
+        ok &= (farthest > 0) & (dist <= farthest + SPOT_VIEW_SLACK_M)
+    return ok
+
+
+def taken_spots(spots, collected=()) -> np.ndarray:
+    """bool (n,): spots within SPOT_TAKEN_M of a collected sample (a spot holds one sample at most)."""
+    spots = np.asarray(spots, float).reshape(-1, 2)
+    done = np.zeros(len(spots), bool)
     for cx, cy in collected:
         done |= np.hypot(spots[:, 0] - cx, spots[:, 1] - cy) <= SPOT_TAKEN_M
     return done
 
 
-def spot_stands(spots, free, dist) -> np.ndarray:
-    """(n, 3) int rows (row, col, ok) per spot: the reachable (finite ``dist``) floor cell nearest it, within
-    SPOT_STAND_REACH_M; ok = 0 when there is none."""
+def spot_stands(spots, free, dist, views=None) -> np.ndarray:
+    """(n, 3) int rows (row, col, ok) per spot: the search's stand, ok = 0 where it has none.
+
+    With ``views``: the reachable (finite ``dist``) floor cell, by path the nearest, among the places the table
+    shows the spot from, SPOT_STAND_MIN_M or more away where any such place is. Without: the reachable floor cell
+    nearest the spot, within SPOT_STAND_REACH_M."""
     spots = np.asarray(spots, float).reshape(-1, 2)
     out = np.zeros((len(spots), 3), int)
-    reach = int(math.ceil(SPOT_STAND_REACH_M))
     size = free.shape[0]
-    for k, (row, col) in enumerate(spot_cells(spots)):  # 33 spots, a 13 x 13 window each
-        r0, r1, c0, c1 = max(row - reach, 0), min(row + reach + 1, size), max(col - reach, 0), min(col + reach + 1, size)
-        ok = free[r0:r1, c0:c1] & np.isfinite(dist[r0:r1, c0:c1])
+    reachable = free & np.isfinite(dist)
+    for k in range(len(spots)):  # 33 spots, a few hundred candidate places each
+        cells = _view_cells(views, k, spots[k]) if views is not None and views.shown.shape[0] == len(spots) else None
+        if cells is None:
+            cells = _near_cells(spots[k], size)
+        rows, cols, pref = cells
+        ok = reachable[rows, cols]
         if not ok.any():
             continue
-        rr, cc = np.nonzero(ok)
-        d = np.hypot(cc + c0 + 0.5 - spots[k, 0], rr + r0 + 0.5 - spots[k, 1])
-        j = int(np.argmin(d + 1e-3 * dist[rr + r0, cc + c0]))  # ties go to the cheaper cell to reach
-        if d[j] <= SPOT_STAND_REACH_M:
-            out[k] = (rr[j] + r0, cc[j] + c0, 1)
+        rows, cols, pref = rows[ok], cols[ok], pref[ok]
+        j = int(np.lexsort((dist[rows, cols], -pref))[0])  # preferred places first, then the cheapest to reach
+        out[k] = (rows[j], cols[j], 1)
     return out
+
+
+def _view_cells(views, k, spot):
+    """(rows, cols, preferred) of the cells the table shows spot k from (preferred: SPOT_STAND_MIN_M or farther)."""
+    b_idx, r_idx = np.nonzero(views.shown[k])
+    if len(b_idx) == 0:
+        return None
+    b = np.radians(b_idx * views.step_deg)
+    r = views.ranges_m[r_idx]
+    x, y = spot[0] + r * np.cos(b), spot[1] + r * np.sin(b)
+    size = grid.GRID_SIZE
+    rows = np.clip(np.floor(y), 0, size - 1).astype(int)
+    cols = np.clip(np.floor(x), 0, size - 1).astype(int)
+    return rows, cols, (r >= SPOT_STAND_MIN_M).astype(int)
+
+
+def _near_cells(spot, size):
+    """(rows, cols, preferred) of the cells within SPOT_STAND_REACH_M of the spot, the nearest preferred."""
+    reach = int(math.ceil(SPOT_STAND_REACH_M))
+    row, col = int(math.floor(spot[1])), int(math.floor(spot[0]))
+    rr, cc = np.mgrid[max(row - reach, 0):min(row + reach + 1, size), max(col - reach, 0):min(col + reach + 1, size)]
+    rr, cc = rr.ravel(), cc.ravel()
+    d = np.hypot(cc + 0.5 - spot[0], rr + 0.5 - spot[1])
+    keep = d <= SPOT_STAND_REACH_M
+    rr, cc, d = rr[keep], cc[keep], d[keep]
+    return rr, cc, -np.round(d * 100).astype(int)  # nearer is preferred over cheaper to reach
+
+
+VIEWS = load_views()  # the table the client ships (None: range and heading alone)
 
 
 def face_heading(spot_xy, pos, yaw_deg):

@@ -85,8 +85,8 @@ def _spot_goal(rover, nav, s, free, dist):
             log.info("sample search: the canyon's %d sample spots are checked first", len(nav.spots))
     if len(nav.spots) == 0:
         return None
-    nav.spot_done |= sample_spots.checked_spots(nav.spots, nav.spot_sight, nav.collected)
-    stands = sample_spots.spot_stands(nav.spots, free, dist)
+    nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
+    stands = sample_spots.spot_stands(nav.spots, free, dist, sample_spots.VIEWS)
     usable = ~nav.spot_done & (stands[:, 2] == 1)
     if not usable.any():
         nav.spot_goal = None

@@ -26,13 +26,37 @@ def test_the_spots_lie_in_the_canyon_around_its_start():
     assert far.min() > 5 and far.max() < 120  # none on the start, all within the canyon's arms
 
 
-def test_a_spot_is_checked_by_a_close_look_or_a_collected_sample_beside_it():
-    spots = np.array([(10.4, 20.7), (50.2, 60.9), (80.0, 80.0)])
-    seen = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
-    seen[20, 10] = True  # row = y, col = x
-    done = S.checked_spots(spots, seen, collected=[(51.0, 62.0)])
-    assert done.tolist() == [True, True, False]
-    assert S.checked_spots(np.zeros((0, 2)), seen).shape == (0,)
+def test_a_spot_counts_as_seen_only_when_faced_from_close_and_from_where_it_shows():
+    spots = np.array([(50.0, 50.0), (80.0, 80.0)])
+    assert S.in_view(spots, (47.0, 50.0), 0.0).tolist() == [True, False]  # 3 m west, facing it
+    assert not S.in_view(spots, (47.0, 50.0), 180.0).any()  # facing away
+    assert not S.in_view(spots, (44.0, 50.0), 0.0).any()  # 6 m: too small to show
+    shown = np.zeros((2, 36, 11), bool)
+    shown[0, 18, :4] = True  # spot 0 shows only from the west (bearing 180 deg), up to 3.5 m
+    views = S.SpotViews(10, np.arange(2.0, 7.01, 0.5), shown)
+    assert S.in_view(spots, (46.0, 50.0), 0.0, views)[0]  # 4 m west: within the 1 m slack
+    assert not S.in_view(spots, (50.0, 47.0), 90.0, views)[0]  # 3 m south, facing it: a rock hides it there
+    assert not S.in_view(spots, (float("nan"), 50.0), 0.0, views).any()
+    assert S.taken_spots(spots, [(51.0, 51.0)]).tolist() == [True, False]
+
+
+def test_the_view_table_loads_only_for_the_spots_it_was_written_for(tmp_path, caplog):
+    views = S.load_views()
+    assert views is not None and views.shown.shape[0] == 33  # the table the client ships
+    assert views.farthest.max() <= 7.0 and (views.farthest.max(axis=1) > 0).all()  # every spot shows from somewhere
+    assert S.load_views(tmp_path / "missing.json") is None
+    (tmp_path / "bad.json").write_text("{not json")
+    assert S.load_views(tmp_path / "bad.json") is None
+    assert S.load_views(S.VIEWS_PATH, spots=S.CANYON_SPOTS + 1.0) is None
+    assert "checked by range and heading alone" in caplog.text
+
+
+def test_the_east_nook_shows_from_few_bearings_and_an_open_spot_from_many():
+    views = S.load_views()
+    shows = (views.farthest > 0).sum(axis=1)
+    nook = int(np.argmin(np.hypot(*(S.CANYON_SPOTS - (148.78, 109.56)).T)))
+    west_tip = int(np.argmin(np.hypot(*(S.CANYON_SPOTS - (21.72, 102.18)).T)))
+    assert shows[nook] <= 8 and shows[west_tip] >= 12
 
 
 def _corridor():
@@ -43,7 +67,7 @@ def _corridor():
     return free, dist
 
 
-def test_a_spots_stand_is_the_nearest_reachable_floor_within_reach():
+def test_without_a_view_table_a_spots_stand_is_the_nearest_reachable_floor():
     free, dist = _corridor()
     spots = np.array([(60.5, 54.5), (55.5, 51.5), (60.5, 61.5), (90.5, 51.5)])
     stands = S.spot_stands(spots, free, dist)
@@ -53,6 +77,19 @@ def test_a_spots_stand_is_the_nearest_reachable_floor_within_reach():
     assert stands[3, 2] == 0  # 20 m past the corridor's end
     dist[52, 60] = np.inf  # that cell cannot be reached: the next nearest can
     assert tuple(S.spot_stands(spots[:1], free, dist)[0]) in {(52, 59, 1), (52, 61, 1)}
+
+
+def test_with_a_view_table_the_stand_is_where_the_spot_shows_from():
+    free, dist = _corridor()
+    spots = np.array([(60.5, 54.5)])
+    shown = np.zeros((1, 36, 11), bool)
+    shown[0, 27, :] = True  # shows only from due south (270 deg), 2-7 m: the corridor lies 2-4 m south
+    shown[0, 9, :] = True  # ...and from the north, where there is no floor
+    views = S.SpotViews(10, np.arange(2.0, 7.01, 0.5), shown)
+    row, col, ok = S.spot_stands(spots, free, dist, views)[0]
+    assert ok and col == 60 and row in (50, 51, 52) and 54.5 - row >= S.SPOT_STAND_MIN_M  # the 2.5 m place lies in row 52
+    shown[0, 27, :] = False
+    assert S.spot_stands(spots, free, dist, S.SpotViews(10, np.arange(2.0, 7.01, 0.5), shown))[0, 2] == 0
 
 
 def test_the_rover_turns_to_face_a_spot_unless_it_already_does():
@@ -90,8 +127,8 @@ def test_on_the_canyon_the_search_drives_to_an_unchecked_spot_first(monkeypatch)
 
 
 def test_a_reached_spot_is_faced_held_then_checked(monkeypatch):
-    monkeypatch.setattr(S, "CANYON_SPOTS", np.array([(12.0, 103.5)]))  # 2 m north of the stand
-    r = _searching_rover((11.5, 101.5), S.CANYON_START_XY)
+    monkeypatch.setattr(S, "CANYON_SPOTS", np.array([(12.5, 105.5)]))  # 2 m north of the stand, the floor's edge cell (row 103)
+    r = _searching_rover((12.5, 102.6), S.CANYON_START_XY)
     search_plan.plan_search(r, r.nav, decision._read_inputs(r))
     assert r.nav.path_goal[0] == "spot"
     decision.mode_search(r, r.nav, decision._read_inputs(r))

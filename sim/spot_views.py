@@ -1,0 +1,122 @@
+"""From where the camera shows each of the canyon's sample spots: the twin draws a sample at every spot and looks
+at it from every side.  ``python -m sim.spot_views [--out navigation/spot_views.json]``
+
+Why: the sample search checks the canyon's 33 spots (navigation.sample_spots).  A spot seen "from close along a
+clear line of sight" on the 1 m map is not always seen by the camera: a rock smaller than a cell, or a slot's
+wall, hides the sample from most sides (the east nook shows only from 150-165 and 240 deg, docs/autonomy.md,
+fourteenth round).  This tool records, per spot, the bearings (from the spot to the camera) and ranges from which
+the twin's JPEG shows a sample of the smallest-but-one spawn scale with at least VISIBLE_MIN_PX gold pixels
+through the client's own gold threshold, in the sun and in the canyon's shadows, with the rover standing on
+floor clear of rocks and facing the spot.  The client reads the table the search ships with
+(navigation/spot_views.json): a spot counts as checked only from where it shows, and the search's stand for it
+is such a place.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import perception
+from safe_write import atomic_write
+
+log = logging.getLogger(__name__)
+
+BEARING_STEP_DEG = 10  # bearings from the spot to the camera, every this many degrees
+RANGES_M = tuple(np.round(np.arange(2.0, 7.01, 0.5), 2))  # camera distances from the spot, m
+SAMPLE_SCALE = 0.40  # prefab scale drawn (spawns are 0.36-0.5; smaller shows fewer pixels)
+SAMPLE_YAWS_DEG = (0.0, 45.0)  # the sample's yaw, both drawn: it shows only when it shows at both
+VISIBLE_MIN_PX = perception.ROCK_MIN_PIXELS + 2  # gold pixels after the JPEG that count as shown: the client's noise floor plus a margin (at 4-5 m the twin shows a median 6 px, megalphian 8, docs/twin-realism.md round 9)
+STAND_MAX_HEIGHT_M = 0.05  # a camera stand must be floor: terrain at most this high, m
+STAND_ROCK_CLEAR_M = 0.6  # ...with no rock this close (the body would stand on it), m
+DEFAULT_OUT = Path(__file__).resolve().parent.parent / "navigation" / "spot_views.json"
+
+
+def stand_ok(world, x, y) -> bool:
+    """Whether the rover can stand at (x, y): floor height, no rock within STAND_ROCK_CLEAR_M."""
+    if not (0.0 <= x < world.size_m and 0.0 <= y < world.size_m):
+        return False
+    if float(world.height_at(np.float32(x), np.float32(y))) > STAND_MAX_HEIGHT_M:
+        return False
+    cell = world.rock_cell_m
+    r = int(math.ceil(STAND_ROCK_CLEAR_M / cell))
+    row, col = int(round(y / cell)), int(round(x / cell))
+    top = world.rock_top[max(row - r, 0):row + r + 1, max(col - r, 0):col + r + 1]
+    return not (top > 0).any()
+
+
+def gold_px(renderer, pose, spot, yaw_deg) -> int:
+    """Gold pixels the client's threshold finds in the twin's JPEG of a sample at ``spot`` seen from ``pose``."""
+    from sim.realism import jpeg_roundtrip
+
+    rgb = renderer.render(pose, samples=[(spot[0], spot[1], SAMPLE_SCALE, yaw_deg)])
+    return int(perception.rock_mask(jpeg_roundtrip(rgb)).sum())
+
+
+def spot_view_table(worlds, spots, progress=True) -> np.ndarray:
+    """bool (n spots, n bearings, n ranges): the sample at each spot shows from there in every one of ``worlds``
+    (the canyon with and without shadows) at every SAMPLE_YAWS_DEG; False where the rover cannot stand."""
+    from sim.render import Renderer
+
+    bearings = np.arange(0, 360, BEARING_STEP_DEG)
+    table = np.zeros((len(spots), len(bearings), len(RANGES_M)), bool)
+    renderers = [Renderer(w) for w in worlds]
+    todo = [(k, i, j) for k in range(len(spots)) for i in range(len(bearings)) for j in range(len(RANGES_M))]
+    try:
+        from tqdm import tqdm
+        todo = tqdm(todo, desc="spot views", disable=not progress)
+    except ImportError:
+        pass
+    for k, i, j in todo:
+        sx, sy = spots[k]
+        b = math.radians(bearings[i])
+        x, y = sx + RANGES_M[j] * math.cos(b), sy + RANGES_M[j] * math.sin(b)
+        if not stand_ok(worlds[0], x, y):
+            continue
+        pose = (x, y, (bearings[i] + 180.0) % 360.0, 0.0, 0.0)
+        table[k, i, j] = all(gold_px(r, pose, (sx, sy), yaw) >= VISIBLE_MIN_PX for r in renderers for yaw in SAMPLE_YAWS_DEG)
+    return table
+
+
+def to_json(spots, table) -> dict:
+    """The table as the client reads it: per spot, one string per bearing of '1' (shows) / '0' over RANGES_M."""
+    return {"about": "navigation/spot_views.json: from where the twin's camera shows a sample at each of the "
+                     "canyon's spots; written by python -m sim.spot_views",
+            "bearing_step_deg": BEARING_STEP_DEG, "ranges_m": [float(r) for r in RANGES_M],
+            "sample_scale": SAMPLE_SCALE, "visible_min_px": VISIBLE_MIN_PX,
+            "spots": [{"x": float(x), "y": float(y),
+                       "views": ["".join("1" if v else "0" for v in row) for row in table[k]]}
+                      for k, (x, y) in enumerate(spots)]}
+
+
+def main(argv=None) -> int:
+    from sim.cli import parse_with_logging
+    from sim.world import load_world, with_shadows
+
+    p = argparse.ArgumentParser(prog="python -m sim.spot_views", description=__doc__.split("\n")[0])
+    p.add_argument("--out", default=str(DEFAULT_OUT), help="JSON to write (default: the one the client ships)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    args = parse_with_logging(p, argv)
+    try:
+        world = load_world("real")
+    except (OSError, ValueError) as exc:
+        log.error("the real world's export is needed (../shared/udacity-rover/world): %s", exc)
+        return 2
+    spots = np.asarray(world.sample_spots, float)
+    table = spot_view_table([with_shadows(world, False), with_shadows(world, True)], spots, not args.no_progress)
+    atomic_write(Path(args.out), (json.dumps(to_json(spots, table), indent=1) + "\n").encode())
+    shown = table.any(axis=2).sum(axis=1)
+    log.info("wrote %s: %d spots; bearings a spot shows from: min %d, median %.0f, max %d of %d", args.out,
+             len(spots), shown.min(), np.median(shown), shown.max(), table.shape[1])
+    for k in np.argsort(shown)[:5]:
+        log.info("  fewest: spot %d (%.2f, %.2f) shows from %d bearings", k, *spots[k], shown[k])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
