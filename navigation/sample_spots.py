@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+import perception
 from navigation import grid
 
 log = logging.getLogger(__name__)
@@ -29,11 +30,13 @@ log = logging.getLogger(__name__)
 USE_CANYON_SPOTS = True  # check the canyon's sample spots first when the mission starts at the canyon's start (False: map-only search)
 CANYON_START_XY = (99.67, 85.589)  # where the real simulator starts the rover, world (x, y) m (simulator facts, section 4)
 CANYON_START_MATCH_M = 1.0  # a mission whose first pose lies this close to it is on the real canyon, m
-SPOT_CHECK_M = 4.5  # a spot is checked once the camera faced it from this close (a scale-0.43 sample shows ~6 px at 4-5 m, 1 px at 5-6 m: docs/twin-realism.md round 9), m
+SPOT_CHECK_M = 4.5  # without a view table: a spot counts as seen once the camera faced it from this close (a scale-0.43 sample shows ~6 px at 4-5 m, 1 px at 5-6 m: docs/twin-realism.md round 9), m
 SPOT_CHECK_HALF_DEG = 30.0  # ...within this angle of the heading (the camera's half-width is ~54 deg; a blob at the edge is cut off), deg
-SPOT_VIEW_SLACK_M = 1.0  # ...and no more than this beyond the farthest range spot_views.json shows it from at that bearing, m
+SPOT_SEEN_MIN_PX = 8  # with the table: a spot counts as seen from a place where the table shows it this many gold px (twice the client's floor: samples' size and yaw vary, real frames show fewer at range)
+SPOT_GLIMPSE_M = 5.5  # a spot in the look cone this close along a clear line of sight on the map, from a bearing the table shows it from at all, is glimpsed: searched after the spots never glimpsed, m
+SPOT_STAND_MIN_PX = 15  # the search's stand for a spot is a place the table shows it this many px from, where one is reachable
 SPOT_TAKEN_M = 2.0  # a spot this close to a collected sample held that sample, m
-SPOT_STAND_MIN_M = 2.5  # the search's stand for a spot lies at least this far from it where a view allows (nearer, the rover noses into the wall foot), m
+SPOT_STAND_MIN_M = 2.5  # ...and at least this far from it where such a place allows (nearer, the rover noses into the wall foot), m
 SPOT_STAND_REACH_M = 8.0  # without a view table: the reachable floor cell nearest the spot, if this close to it, m
 SPOT_STAND_REACHED_M = 1.0  # a stand counts as reached this close (a view a few metres off a bearing window may hide the sample), m
 SPOT_FACE_TOLERANCE_DEG = 15.0  # at the stand, the rover turns to face the spot unless it already points within this, deg
@@ -75,18 +78,28 @@ def spot_cells(spots) -> np.ndarray:
 
 
 class SpotViews:
-    """From where the camera shows each spot: per spot and bearing (from the spot to the camera, every
-    ``step_deg``), the farthest range the twin's JPEG shows a sample from (0: never, a rock or wall hides it)."""
+    """From where the camera shows each spot: per spot, bearing (from the spot to the camera, every ``step_deg``)
+    and range, the gold pixels the twin's JPEG shows of a sample there (-1: no floor to stand on)."""
 
-    def __init__(self, step_deg: float, ranges_m, shown: np.ndarray):
+    def __init__(self, step_deg: float, ranges_m, px: np.ndarray):
         self.step_deg = float(step_deg)
         self.ranges_m = np.asarray(ranges_m, float)
-        self.shown = np.asarray(shown, bool)  # (n spots, n bearings, n ranges)
-        far = np.where(self.shown, self.ranges_m[None, None, :], 0.0)
-        self.farthest = far.max(axis=2)  # (n spots, n bearings), m
+        self.px = np.asarray(px, np.int16)  # (n spots, n bearings, n ranges)
 
-    def bearing_bin(self, bearing_deg):
-        return np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.shown.shape[1]
+    def px_at(self, rows, bearing_deg, range_m) -> np.ndarray:
+        """Pixels shown of spots ``rows`` from the nearest tabled place (0 beyond the last range)."""
+        b = np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.px.shape[1]
+        r = np.asarray(range_m, float)
+        j = np.clip(np.round((r - self.ranges_m[0]) / (self.ranges_m[1] - self.ranges_m[0])).astype(int), 0,
+                    len(self.ranges_m) - 1)
+        px = self.px[rows, b, j].astype(int)
+        return np.where(r <= self.ranges_m[-1] + 0.5 * (self.ranges_m[1] - self.ranges_m[0]), px, 0)
+
+    def shows_from_bearing(self, rows, bearing_deg) -> np.ndarray:
+        """Whether the spots ``rows`` show at all (ROCK_MIN_PIXELS, any range) from that bearing: no rock or wall
+        hides them there."""
+        b = np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.px.shape[1]
+        return self.px[rows, b].max(axis=-1) >= perception.ROCK_MIN_PIXELS
 
 
 def load_views(path=None, spots=None):
@@ -97,33 +110,53 @@ def load_views(path=None, spots=None):
     try:
         data = json.loads(Path(path).read_text())
         xy = np.array([(e["x"], e["y"]) for e in data["spots"]], float)
-        shown = np.array([[[c == "1" for c in row] for row in e["views"]] for e in data["spots"]], bool)
-        if xy.shape != spots.shape or np.abs(xy - spots).max() > 0.05 or shown.ndim != 3:
+        px = np.array([[[int(v) for v in row.split()] for row in e["px"]] for e in data["spots"]], np.int16)
+        if xy.shape != spots.shape or np.abs(xy - spots).max() > 0.05 or px.ndim != 3:
             raise ValueError("written for other spots")
-        if shown.shape[1] * float(data["bearing_step_deg"]) != 360.0 or shown.shape[2] != len(data["ranges_m"]):
+        if px.shape[1] * float(data["bearing_step_deg"]) != 360.0 or px.shape[2] != len(data["ranges_m"]):
             raise ValueError("bearings or ranges do not match the table")
-        return SpotViews(data["bearing_step_deg"], data["ranges_m"], shown)
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return SpotViews(data["bearing_step_deg"], data["ranges_m"], px)
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         log.warning("no spot views from %s (%s): spots count as checked by range and heading alone", path, exc)
         return None
 
 
-def in_view(spots, pos, yaw_deg, views=None) -> np.ndarray:
-    """bool (n,): spots the camera shows from ``pos`` facing ``yaw_deg``: within SPOT_CHECK_HALF_DEG of the heading,
-    no farther than SPOT_CHECK_M and, with ``views``, than SPOT_VIEW_SLACK_M past the farthest range the table shows
-    the spot from at this bearing (never where a rock or wall hides it)."""
-    spots = np.asarray(spots, float).reshape(-1, 2)
-    if len(spots) == 0 or pos is None or not (np.isfinite(pos[0]) and np.isfinite(pos[1]) and np.isfinite(yaw_deg)):
-        return np.zeros(len(spots), bool)
+def _bearings(spots, pos, yaw_deg):
+    """(distance m, bearing from the spot to the rover deg, angle of the spot off the heading deg) per spot."""
     dx, dy = pos[0] - spots[:, 0], pos[1] - spots[:, 1]
-    dist = np.hypot(dx, dy)
-    ahead = np.degrees(np.arctan2(-dy, -dx))  # from the rover to the spot
-    off = np.abs((ahead - yaw_deg + 180.0) % 360.0 - 180.0)
-    ok = (off <= SPOT_CHECK_HALF_DEG) & (dist <= SPOT_CHECK_M)
-    if views is not None and views.shown.shape[0] == len(spots):
-        bins = views.bearing_bin(np.degrees(np.arctan2(dy, dx)) % 360.0)
-        farthest = views.farthest[np.arange(len(spots)), bins]
-        ok &= (farthest > 0) & (dist <= farthest + SPOT_VIEW_SLACK_M)
+    bearing = np.degrees(np.arctan2(dy, dx)) % 360.0
+    off = np.abs(((bearing + 180.0) - yaw_deg + 180.0) % 360.0 - 180.0)
+    return np.hypot(dx, dy), bearing, off
+
+
+def _pose_ok(spots, pos, yaw_deg):
+    return len(spots) > 0 and pos is not None and all(np.isfinite(v) for v in (pos[0], pos[1], yaw_deg))
+
+
+def in_view(spots, pos, yaw_deg, views=None) -> np.ndarray:
+    """bool (n,): spots the camera shows well from ``pos`` facing ``yaw_deg``: within SPOT_CHECK_HALF_DEG of the
+    heading and, with ``views``, from a place the table shows them SPOT_SEEN_MIN_PX from (never where a rock or
+    wall hides them); without, no farther than SPOT_CHECK_M."""
+    spots = np.asarray(spots, float).reshape(-1, 2)
+    if not _pose_ok(spots, pos, yaw_deg):
+        return np.zeros(len(spots), bool)
+    dist, bearing, off = _bearings(spots, pos, yaw_deg)
+    ok = off <= SPOT_CHECK_HALF_DEG
+    if views is not None and views.px.shape[0] == len(spots):
+        return ok & (views.px_at(np.arange(len(spots)), bearing, dist) >= SPOT_SEEN_MIN_PX)
+    return ok & (dist <= SPOT_CHECK_M)
+
+
+def glimpse_candidates(spots, pos, yaw_deg, views=None) -> np.ndarray:
+    """bool (n,): spots within SPOT_GLIMPSE_M in the look cone from a bearing the table shows them from at all; a
+    clear line of sight on the map (the caller's) makes them glimpsed."""
+    spots = np.asarray(spots, float).reshape(-1, 2)
+    if not _pose_ok(spots, pos, yaw_deg):
+        return np.zeros(len(spots), bool)
+    dist, bearing, off = _bearings(spots, pos, yaw_deg)
+    ok = (off <= perception.LOOK_HALF_ANGLE_DEG) & (dist <= SPOT_GLIMPSE_M)
+    if views is not None and views.px.shape[0] == len(spots):
+        ok &= views.shows_from_bearing(np.arange(len(spots)), bearing)
     return ok
 
 
@@ -140,14 +173,14 @@ def spot_stands(spots, free, dist, views=None) -> np.ndarray:
     """(n, 3) int rows (row, col, ok) per spot: the search's stand, ok = 0 where it has none.
 
     With ``views``: the reachable (finite ``dist``) floor cell, by path the nearest, among the places the table
-    shows the spot from, SPOT_STAND_MIN_M or more away where any such place is. Without: the reachable floor cell
-    nearest the spot, within SPOT_STAND_REACH_M."""
+    shows the spot well from (_view_cells: where it shows best, not nosing into it, where such a place is
+    reachable). Without: the reachable floor cell nearest the spot, within SPOT_STAND_REACH_M."""
     spots = np.asarray(spots, float).reshape(-1, 2)
     out = np.zeros((len(spots), 3), int)
     size = free.shape[0]
     reachable = free & np.isfinite(dist)
     for k in range(len(spots)):  # 33 spots, a few hundred candidate places each
-        cells = _view_cells(views, k, spots[k]) if views is not None and views.shown.shape[0] == len(spots) else None
+        cells = _view_cells(views, k, spots[k]) if views is not None and views.px.shape[0] == len(spots) else None
         if cells is None:
             cells = _near_cells(spots[k], size)
         rows, cols, pref = cells
@@ -161,17 +194,18 @@ def spot_stands(spots, free, dist, views=None) -> np.ndarray:
 
 
 def _view_cells(views, k, spot):
-    """(rows, cols, preferred) of the cells the table shows spot k from (preferred: SPOT_STAND_MIN_M or farther)."""
-    b_idx, r_idx = np.nonzero(views.shown[k])
+    """(rows, cols, preference) of the cells the table shows spot k from with SPOT_SEEN_MIN_PX or more (preferred:
+    SPOT_STAND_MIN_PX or more, then SPOT_STAND_MIN_M or farther)."""
+    px = views.px[k]
+    b_idx, r_idx = np.nonzero(px >= SPOT_SEEN_MIN_PX)
     if len(b_idx) == 0:
         return None
     b = np.radians(b_idx * views.step_deg)
     r = views.ranges_m[r_idx]
     x, y = spot[0] + r * np.cos(b), spot[1] + r * np.sin(b)
-    size = grid.GRID_SIZE
-    rows = np.clip(np.floor(y), 0, size - 1).astype(int)
-    cols = np.clip(np.floor(x), 0, size - 1).astype(int)
-    return rows, cols, (r >= SPOT_STAND_MIN_M).astype(int)
+    rows = np.clip(np.floor(y), 0, grid.GRID_SIZE - 1).astype(int)
+    cols = np.clip(np.floor(x), 0, grid.GRID_SIZE - 1).astype(int)
+    return rows, cols, 2 * (px[b_idx, r_idx] >= SPOT_STAND_MIN_PX) + (r >= SPOT_STAND_MIN_M)
 
 
 def _near_cells(spot, size):

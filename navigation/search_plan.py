@@ -49,9 +49,9 @@ def plan_search(rover, nav, s, frame_maps=None):
     spot = _spot_goal(rover, nav, s, free, dist)
     if spot is not None:
         if nav.path_goal != ("spot", spot):
-            log.info("sample search: spot %d (%.1f, %.1f) from its stand %s, from (%.1f, %.1f), %d open, t=%.1f",
-                     nav.spot_goal, *nav.spots[nav.spot_goal], spot, s.pos[0], s.pos[1],
-                     np.count_nonzero(~nav.spot_done), s.t)
+            log.info("sample search: spot %d (%.1f, %.1f) from its stand %s, from (%.1f, %.1f), %d open (%d glimpsed), "
+                     "t=%.1f", nav.spot_goal, *nav.spots[nav.spot_goal], spot, s.pos[0], s.pos[1],
+                     np.count_nonzero(~nav.spot_done), np.count_nonzero(~nav.spot_done & nav.spot_glimpsed), s.t)
         paths.set_path(nav, s, "spot", spot, astar.path_to(parent, cost.shape, spot))
         return
     candidates = {"peek": _peek_goal(rover, nav, s, free, dist),
@@ -79,15 +79,14 @@ def _spot_goal(rover, nav, s, free, dist):
     """The stand (row, col) of the sample spot to check next (the current one while it is still open, else the
     cheapest by explore.search_cost), setting nav.spot_goal; None when no open spot has a reachable stand."""
     if nav.spots is None:
-        nav.spots = sample_spots.spots_for_start(nav.home)
-        nav.spot_done = np.zeros(len(nav.spots), bool)
-        if len(nav.spots):
-            log.info("sample search: the canyon's %d sample spots are checked first", len(nav.spots))
+        init_spots(nav)
     if len(nav.spots) == 0:
         return None
     nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
     stands = sample_spots.spot_stands(nav.spots, free, dist, sample_spots.VIEWS)
     usable = ~nav.spot_done & (stands[:, 2] == 1)
+    if (usable & ~nav.spot_glimpsed).any():
+        usable &= ~nav.spot_glimpsed  # never glimpsed first: a glimpsed spot is likelier empty
     if not usable.any():
         nav.spot_goal = None
         return None
@@ -100,6 +99,15 @@ def _spot_goal(rover, nav, s, free, dist):
         k = int(idx[int(np.argmin(costs))])
     nav.spot_goal = k
     return int(stands[k, 0]), int(stands[k, 1])
+
+
+def init_spots(nav):
+    """The sample spots this mission can hold (sample_spots.spots_for_start at nav.home), none checked yet."""
+    nav.spots = sample_spots.spots_for_start(nav.home)
+    nav.spot_done = np.zeros(len(nav.spots), bool)
+    nav.spot_glimpsed = np.zeros(len(nav.spots), bool)
+    if len(nav.spots):
+        log.info("the canyon's %d sample spots are searched first once the map is complete", len(nav.spots))
 
 
 def spot_done(nav, s):

@@ -4,12 +4,12 @@ at it from every side.  ``python -m sim.spot_views [--out navigation/spot_views.
 Why: the sample search checks the canyon's 33 spots (navigation.sample_spots).  A spot seen "from close along a
 clear line of sight" on the 1 m map is not always seen by the camera: a rock smaller than a cell, or a slot's
 wall, hides the sample from most sides (the east nook shows only from 150-165 and 240 deg, docs/autonomy.md,
-fourteenth round).  This tool records, per spot, the bearings (from the spot to the camera) and ranges from which
-the twin's JPEG shows a sample of the smallest-but-one spawn scale with at least VISIBLE_MIN_PX gold pixels
-through the client's own gold threshold, in the sun and in the canyon's shadows, with the rover standing on
-floor clear of rocks and facing the spot.  The client reads the table the search ships with
-(navigation/spot_views.json): a spot counts as checked only from where it shows, and the search's stand for it
-is such a place.
+fourteenth round).  This tool records, per spot, bearing (from the spot to the camera, every BEARING_STEP_DEG)
+and range, how many gold pixels the client's own gold threshold finds in the twin's JPEG of a sample there (scale
+SAMPLE_SCALE, the fewest over SAMPLE_YAWS_DEG, in the sun and in the canyon's shadows), with the rover standing on
+floor clear of rocks and facing the spot; -1 where it cannot stand.  The client reads the table it ships with
+(navigation/spot_views.json) against its own pixel lines (navigation.sample_spots): a spot counts as checked only
+from where it shows well, and the search's stand for it is where it shows best.
 """
 from __future__ import annotations
 
@@ -31,7 +31,6 @@ BEARING_STEP_DEG = 10  # bearings from the spot to the camera, every this many d
 RANGES_M = tuple(np.round(np.arange(2.0, 7.01, 0.5), 2))  # camera distances from the spot, m
 SAMPLE_SCALE = 0.40  # prefab scale drawn (spawns are 0.36-0.5; smaller shows fewer pixels)
 SAMPLE_YAWS_DEG = (0.0, 45.0)  # the sample's yaw, both drawn: it shows only when it shows at both
-VISIBLE_MIN_PX = perception.ROCK_MIN_PIXELS + 2  # gold pixels after the JPEG that count as shown: the client's noise floor plus a margin (at 4-5 m the twin shows a median 6 px, megalphian 8, docs/twin-realism.md round 9)
 STAND_MAX_HEIGHT_M = 0.05  # a camera stand must be floor: terrain at most this high, m
 STAND_ROCK_CLEAR_M = 0.6  # ...with no rock this close (the body would stand on it), m
 DEFAULT_OUT = Path(__file__).resolve().parent.parent / "navigation" / "spot_views.json"
@@ -59,12 +58,12 @@ def gold_px(renderer, pose, spot, yaw_deg) -> int:
 
 
 def spot_view_table(worlds, spots, progress=True) -> np.ndarray:
-    """bool (n spots, n bearings, n ranges): the sample at each spot shows from there in every one of ``worlds``
-    (the canyon with and without shadows) at every SAMPLE_YAWS_DEG; False where the rover cannot stand."""
+    """int16 (n spots, n bearings, n ranges): the fewest gold pixels a sample at each spot shows from there over
+    ``worlds`` (the canyon with and without shadows) and SAMPLE_YAWS_DEG; -1 where the rover cannot stand."""
     from sim.render import Renderer
 
     bearings = np.arange(0, 360, BEARING_STEP_DEG)
-    table = np.zeros((len(spots), len(bearings), len(RANGES_M)), bool)
+    table = np.full((len(spots), len(bearings), len(RANGES_M)), -1, np.int16)
     renderers = [Renderer(w) for w in worlds]
     todo = [(k, i, j) for k in range(len(spots)) for i in range(len(bearings)) for j in range(len(RANGES_M))]
     try:
@@ -79,18 +78,18 @@ def spot_view_table(worlds, spots, progress=True) -> np.ndarray:
         if not stand_ok(worlds[0], x, y):
             continue
         pose = (x, y, (bearings[i] + 180.0) % 360.0, 0.0, 0.0)
-        table[k, i, j] = all(gold_px(r, pose, (sx, sy), yaw) >= VISIBLE_MIN_PX for r in renderers for yaw in SAMPLE_YAWS_DEG)
+        table[k, i, j] = min(gold_px(r, pose, (sx, sy), yaw) for r in renderers for yaw in SAMPLE_YAWS_DEG)
     return table
 
 
 def to_json(spots, table) -> dict:
-    """The table as the client reads it: per spot, one string per bearing of '1' (shows) / '0' over RANGES_M."""
-    return {"about": "navigation/spot_views.json: from where the twin's camera shows a sample at each of the "
-                     "canyon's spots; written by python -m sim.spot_views",
+    """The table as the client reads it: per spot, one line per bearing of the pixel counts over RANGES_M."""
+    return {"about": "navigation/spot_views.json: gold pixels the twin's camera shows of a sample at each of the "
+                     "canyon's spots, per bearing (rows) and range (columns); -1 = no floor to stand on; "
+                     "written by python -m sim.spot_views",
             "bearing_step_deg": BEARING_STEP_DEG, "ranges_m": [float(r) for r in RANGES_M],
-            "sample_scale": SAMPLE_SCALE, "visible_min_px": VISIBLE_MIN_PX,
-            "spots": [{"x": float(x), "y": float(y),
-                       "views": ["".join("1" if v else "0" for v in row) for row in table[k]]}
+            "sample_scale": SAMPLE_SCALE,
+            "spots": [{"x": float(x), "y": float(y), "px": [" ".join(str(int(v)) for v in row) for row in table[k]]}
                       for k, (x, y) in enumerate(spots)]}
 
 
@@ -115,9 +114,9 @@ def main(argv=None) -> int:
         return 2
     table = spot_view_table([with_shadows(world, False), with_shadows(world, True)], spots, not args.no_progress)
     atomic_write(Path(args.out), (json.dumps(to_json(spots, table), indent=1) + "\n").encode())
-    shown = table.any(axis=2).sum(axis=1)
-    log.info("wrote %s: %d spots; bearings a spot shows from: min %d, median %.0f, max %d of %d", args.out,
-             len(spots), shown.min(), np.median(shown), shown.max(), table.shape[1])
+    shown = (table >= perception.ROCK_MIN_PIXELS).any(axis=2).sum(axis=1)
+    log.info("wrote %s: %d spots; bearings a spot shows from (>= %d px): min %d, median %.0f, max %d of %d", args.out,
+             len(spots), perception.ROCK_MIN_PIXELS, shown.min(), np.median(shown), shown.max(), table.shape[1])
     for k in np.argsort(shown)[:5]:
         log.info("  fewest: spot %d (%.2f, %.2f) shows from %d bearings", k, *spots[k], shown[k])
     return 0

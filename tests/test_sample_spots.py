@@ -26,24 +26,42 @@ def test_the_spots_lie_in_the_canyon_around_its_start():
     assert far.min() > 5 and far.max() < 120  # none on the start, all within the canyon's arms
 
 
-def test_a_spot_counts_as_seen_only_when_faced_from_close_and_from_where_it_shows():
+def _views(n_spots, tabled):
+    """SpotViews of n_spots with no view but ``tabled`` {(spot, bearing index, range index): px}."""
+    px = np.zeros((n_spots, 36, 11), np.int16)
+    for (k, i, j), v in tabled.items():
+        px[k, i, j] = v
+    return S.SpotViews(10, np.arange(2.0, 7.01, 0.5), px)
+
+
+def test_a_spot_counts_as_seen_only_when_faced_from_where_it_shows_well():
     spots = np.array([(50.0, 50.0), (80.0, 80.0)])
-    assert S.in_view(spots, (47.0, 50.0), 0.0).tolist() == [True, False]  # 3 m west, facing it
+    assert S.in_view(spots, (47.0, 50.0), 0.0).tolist() == [True, False]  # no table: 3 m west, facing it
     assert not S.in_view(spots, (47.0, 50.0), 180.0).any()  # facing away
     assert not S.in_view(spots, (44.0, 50.0), 0.0).any()  # 6 m: too small to show
-    shown = np.zeros((2, 36, 11), bool)
-    shown[0, 18, :4] = True  # spot 0 shows only from the west (bearing 180 deg), up to 3.5 m
-    views = S.SpotViews(10, np.arange(2.0, 7.01, 0.5), shown)
-    assert S.in_view(spots, (46.0, 50.0), 0.0, views)[0]  # 4 m west: within the 1 m slack
-    assert not S.in_view(spots, (50.0, 47.0), 90.0, views)[0]  # 3 m south, facing it: a rock hides it there
+    views = _views(2, {(0, 18, 2): 20, (0, 18, 4): 5, (0, 27, 2): 20})  # from the west at 3 m (20 px) and 4 m (5 px), from the south at 3 m
+    assert S.in_view(spots, (47.0, 50.0), 0.0, views)[0]
+    assert not S.in_view(spots, (46.0, 50.0), 0.0, views)[0]  # 4 m: 5 px, under SPOT_SEEN_MIN_PX
+    assert not S.in_view(spots, (50.0, 47.0), 0.0, views)[0]  # south, but facing east
+    assert S.in_view(spots, (50.0, 47.0), 90.0, views)[0]
+    assert not S.in_view(spots, (53.0, 50.0), 180.0, views)[0]  # east: a rock hides it there
     assert not S.in_view(spots, (float("nan"), 50.0), 0.0, views).any()
     assert S.taken_spots(spots, [(51.0, 51.0)]).tolist() == [True, False]
 
 
+def test_a_spot_is_glimpsed_farther_but_only_from_a_bearing_it_shows_from():
+    spots = np.array([(50.0, 50.0)])
+    views = _views(1, {(0, 18, 2): 20})  # shows from the west only
+    assert S.glimpse_candidates(spots, (45.0, 50.0), 0.0, views)[0]  # 5 m: glimpsed, not seen
+    assert not S.in_view(spots, (45.0, 50.0), 0.0, views)[0]
+    assert not S.glimpse_candidates(spots, (50.0, 45.0), 90.0, views)[0]  # from the south it never shows
+    assert not S.glimpse_candidates(spots, (43.0, 50.0), 0.0, views)[0]  # 7 m: beyond SPOT_GLIMPSE_M
+
+
 def test_the_view_table_loads_only_for_the_spots_it_was_written_for(tmp_path, caplog):
     views = S.load_views()
-    assert views is not None and views.shown.shape[0] == 33  # the table the client ships
-    assert views.farthest.max() <= 7.0 and (views.farthest.max(axis=1) > 0).all()  # every spot shows from somewhere
+    assert views is not None and views.px.shape == (33, 36, 11)  # the table the client ships
+    assert (views.px >= S.SPOT_SEEN_MIN_PX).any(axis=(1, 2)).all()  # every spot shows well from somewhere
     assert S.load_views(tmp_path / "missing.json") is None
     (tmp_path / "bad.json").write_text("{not json")
     assert S.load_views(tmp_path / "bad.json") is None
@@ -53,7 +71,7 @@ def test_the_view_table_loads_only_for_the_spots_it_was_written_for(tmp_path, ca
 
 def test_the_east_nook_shows_from_few_bearings_and_an_open_spot_from_many():
     views = S.load_views()
-    shows = (views.farthest > 0).sum(axis=1)
+    shows = (views.px >= S.SPOT_SEEN_MIN_PX).any(axis=2).sum(axis=1)
     nook = int(np.argmin(np.hypot(*(S.CANYON_SPOTS - (148.78, 109.56)).T)))
     west_tip = int(np.argmin(np.hypot(*(S.CANYON_SPOTS - (21.72, 102.18)).T)))
     assert shows[nook] <= 8 and shows[west_tip] >= 12
@@ -79,17 +97,17 @@ def test_without_a_view_table_a_spots_stand_is_the_nearest_reachable_floor():
     assert tuple(S.spot_stands(spots[:1], free, dist)[0]) in {(52, 59, 1), (52, 61, 1)}
 
 
-def test_with_a_view_table_the_stand_is_where_the_spot_shows_from():
+def test_with_a_view_table_the_stand_is_where_the_spot_shows_best():
     free, dist = _corridor()
     spots = np.array([(60.5, 54.5)])
-    shown = np.zeros((1, 36, 11), bool)
-    shown[0, 27, :] = True  # shows only from due south (270 deg), 2-7 m: the corridor lies 2-4 m south
-    shown[0, 9, :] = True  # ...and from the north, where there is no floor
-    views = S.SpotViews(10, np.arange(2.0, 7.01, 0.5), shown)
+    south = {(0, 27, j): 10 for j in range(11)}  # from due south (270 deg), 2-7 m: the corridor lies 2-4 m south
+    views = _views(1, {**south, (0, 27, 1): 30, (0, 9, 2): 30})  # best from 2.5 m south; north: no floor there
+    row, col, ok = S.spot_stands(spots, free, dist, views)[0]
+    assert ok and (row, col) == (52, 60)  # the 2.5 m place, though 3-4 m ones are cheaper to reach
+    views = _views(1, south)
     row, col, ok = S.spot_stands(spots, free, dist, views)[0]
     assert ok and col == 60 and row in (50, 51, 52) and 54.5 - row >= S.SPOT_STAND_MIN_M  # the 2.5 m place lies in row 52
-    shown[0, 27, :] = False
-    assert S.spot_stands(spots, free, dist, S.SpotViews(10, np.arange(2.0, 7.01, 0.5), shown))[0, 2] == 0
+    assert S.spot_stands(spots, free, dist, _views(1, {(0, 9, 2): 30}))[0, 2] == 0  # shows only from where no floor is
 
 
 def test_the_rover_turns_to_face_a_spot_unless_it_already_does():

@@ -26,7 +26,7 @@ def test_the_shipped_table_is_what_the_twin_shows(real_worlds, xy):
     table = V.spot_view_table(real_worlds, sample_spots.CANYON_SPOTS[k:k + 1], progress=False)
     shipped = sample_spots.load_views()
     assert shipped is not None
-    assert np.array_equal(table[0], shipped.shown[k]), "navigation/spot_views.json is stale: run python -m sim.spot_views"
+    assert np.array_equal(table[0], shipped.px[k]), "navigation/spot_views.json is stale: run python -m sim.spot_views"
 
 
 def test_stands_are_floor_clear_of_rocks(real_worlds):
@@ -37,10 +37,10 @@ def test_stands_are_floor_clear_of_rocks(real_worlds):
 
 
 def test_the_json_round_trips_through_the_clients_loader(tmp_path):
-    shown = np.zeros((len(sample_spots.CANYON_SPOTS), 36, len(V.RANGES_M)), bool)
-    shown[3, 5, :2] = True
+    px = np.full((len(sample_spots.CANYON_SPOTS), 36, len(V.RANGES_M)), -1, np.int16)
+    px[3, 5, :2] = (25, 9)
     path = tmp_path / "views.json"
-    path.write_text(json.dumps(V.to_json(sample_spots.CANYON_SPOTS, shown)))
+    path.write_text(json.dumps(V.to_json(sample_spots.CANYON_SPOTS, px)))
     views = sample_spots.load_views(path)
-    assert views is not None and np.array_equal(views.shown, shown)
-    assert views.farthest[3, 5] == pytest.approx(V.RANGES_M[1]) and views.farthest[3, 6] == 0
+    assert views is not None and np.array_equal(views.px, px)
+    assert views.px_at([3], 50.0, 2.5)[0] == 9 and views.px_at([3], 50.0, 9.0)[0] == 0
