@@ -188,7 +188,6 @@ class NavMemory:
         self.pocket_reached = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)  # faint pockets driven into (or given up); kept through the second sweep
         self.spots = None  # (n, 2) world (x, y) of the sample spots this mission can hold (navigation.sample_spots), set once home is known
         self.spot_done = None  # bool (n,): spots checked (seen from close, faced from their stand, held a collected sample, or given up)
-        self.spot_glimpsed = None  # bool (n,): spots glimpsed (sample_spots.glimpse_candidates in a clear line of sight), searched after the rest
         self.spot_goal = None  # index of the spot the search's "spot" goal is the stand of, or None
         self.spot_faced = None  # the spot index the rover last turned at its stand to face
         self.spot_hold_until = None  # ...and until when it holds still facing it, s
@@ -394,21 +393,22 @@ def _update_memory(rover, nav, s):
 
 
 def _check_spots(rover, nav, s):
-    """Rule out the sample spots (navigation.sample_spots) the camera has faced from where they show, and those
-    that held a collected sample, from the mission's start on: the search later drives only to those still open."""
+    """Rule out the sample spots (navigation.sample_spots) the camera has faced from where they show (in_view), or
+    glimpsed along a clear line of sight on the map from a bearing they show from, and those that held a collected
+    sample, from the mission's start on: the search later drives only to those still open."""
     if nav.spots is None and nav.home is not None:
         search_plan.init_spots(nav)
     if nav.spots is None or len(nav.spots) == 0 or nav.spot_done.all():
         return
     nav.spot_done |= sample_spots.in_view(nav.spots, s.pos, s.yaw, sample_spots.VIEWS)
     nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
-    maybe = sample_spots.glimpse_candidates(nav.spots, s.pos, s.yaw, sample_spots.VIEWS) & ~nav.spot_glimpsed
+    maybe = sample_spots.glimpse_candidates(nav.spots, s.pos, s.yaw, sample_spots.VIEWS) & ~nav.spot_done
     if maybe.any():  # a line of sight on the map only when a spot could be glimpsed now
         sight = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
         explore.mark_in_sight(sight, getattr(rover, "worldmap", None), s.pos, s.yaw, sample_spots.SPOT_GLIMPSE_M,
                               perception.LOOK_HALF_ANGLE_DEG, _frame_reach(s))
         cells = sample_spots.spot_cells(nav.spots)
-        nav.spot_glimpsed |= maybe & sight[cells[:, 0], cells[:, 1]]
+        nav.spot_done |= maybe & sight[cells[:, 0], cells[:, 1]]
 
 
 def _register_collection(nav, s):

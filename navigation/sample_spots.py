@@ -33,7 +33,7 @@ CANYON_START_MATCH_M = 1.0  # a mission whose first pose lies this close to it i
 SPOT_CHECK_M = 4.5  # without a view table: a spot counts as seen once the camera faced it from this close (a scale-0.43 sample shows ~6 px at 4-5 m, 1 px at 5-6 m: docs/twin-realism.md round 9), m
 SPOT_CHECK_HALF_DEG = 30.0  # ...within this angle of the heading (the camera's half-width is ~54 deg; a blob at the edge is cut off), deg
 SPOT_SEEN_MIN_PX = 8  # with the table: a spot counts as seen from a place where the table shows it this many gold px (twice the client's floor: samples' size and yaw vary, real frames show fewer at range)
-SPOT_GLIMPSE_M = 5.5  # a spot in the look cone this close along a clear line of sight on the map, from a bearing the table shows it from at all, is glimpsed: searched after the spots never glimpsed, m
+SPOT_GLIMPSE_M = 5.5  # a spot in the look cone this close along a clear line of sight on the map, from a bearing the table shows it from at all, counts as seen too (the rover drives on; the table alone would leave half the canyon's spots to visit), m
 SPOT_STAND_MIN_PX = 15  # the search's stand for a spot is a place the table shows it this many px from, where one is reachable
 SPOT_TAKEN_M = 2.0  # a spot this close to a collected sample held that sample, m
 SPOT_STAND_MIN_M = 2.5  # ...and at least this far from it where such a place allows (nearer, the rover noses into the wall foot), m
@@ -148,8 +148,8 @@ def in_view(spots, pos, yaw_deg, views=None) -> np.ndarray:
 
 
 def glimpse_candidates(spots, pos, yaw_deg, views=None) -> np.ndarray:
-    """bool (n,): spots within SPOT_GLIMPSE_M in the look cone from a bearing the table shows them from at all; a
-    clear line of sight on the map (the caller's) makes them glimpsed."""
+    """bool (n,): spots within SPOT_GLIMPSE_M in the look cone from a bearing the table shows them from at all (no
+    rock or wall hides them there); a clear line of sight on the map (the caller's) makes them seen."""
     spots = np.asarray(spots, float).reshape(-1, 2)
     if not _pose_ok(spots, pos, yaw_deg):
         return np.zeros(len(spots), bool)

@@ -49,9 +49,9 @@ def plan_search(rover, nav, s, frame_maps=None):
     spot = _spot_goal(rover, nav, s, free, dist)
     if spot is not None:
         if nav.path_goal != ("spot", spot):
-            log.info("sample search: spot %d (%.1f, %.1f) from its stand %s, from (%.1f, %.1f), %d open (%d glimpsed), "
-                     "t=%.1f", nav.spot_goal, *nav.spots[nav.spot_goal], spot, s.pos[0], s.pos[1],
-                     np.count_nonzero(~nav.spot_done), np.count_nonzero(~nav.spot_done & nav.spot_glimpsed), s.t)
+            log.info("sample search: spot %d (%.1f, %.1f) from its stand %s, from (%.1f, %.1f), %d open, t=%.1f",
+                     nav.spot_goal, *nav.spots[nav.spot_goal], spot, s.pos[0], s.pos[1],
+                     np.count_nonzero(~nav.spot_done), s.t)
         paths.set_path(nav, s, "spot", spot, astar.path_to(parent, cost.shape, spot))
         return
     candidates = {"peek": _peek_goal(rover, nav, s, free, dist),
@@ -85,8 +85,6 @@ def _spot_goal(rover, nav, s, free, dist):
     nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
     stands = sample_spots.spot_stands(nav.spots, free, dist, sample_spots.VIEWS)
     usable = ~nav.spot_done & (stands[:, 2] == 1)
-    if (usable & ~nav.spot_glimpsed).any():
-        usable &= ~nav.spot_glimpsed  # never glimpsed first: a glimpsed spot is likelier empty
     if not usable.any():
         nav.spot_goal = None
         return None
@@ -105,7 +103,6 @@ def init_spots(nav):
     """The sample spots this mission can hold (sample_spots.spots_for_start at nav.home), none checked yet."""
     nav.spots = sample_spots.spots_for_start(nav.home)
     nav.spot_done = np.zeros(len(nav.spots), bool)
-    nav.spot_glimpsed = np.zeros(len(nav.spots), bool)
     if len(nav.spots):
         log.info("the canyon's %d sample spots are searched first once the map is complete", len(nav.spots))
 
