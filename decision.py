@@ -400,15 +400,19 @@ def _check_spots(rover, nav, s):
         search_plan.init_spots(nav)
     if nav.spots is None or len(nav.spots) == 0 or nav.spot_done.all():
         return
+    was = nav.spot_done.copy()
     nav.spot_done |= sample_spots.in_view(nav.spots, s.pos, s.yaw, sample_spots.VIEWS)
     nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
-    maybe = sample_spots.glimpse_candidates(nav.spots, s.pos, s.yaw, sample_spots.VIEWS) & ~nav.spot_done
-    if maybe.any():  # a line of sight on the map only when a spot could be glimpsed now
+    maybe = sample_spots.glimpse_candidates(nav.spots, s.pos, sample_spots.VIEWS) & ~nav.spot_done
+    if maybe.any():  # a line of sight on the map only when a spot is near
         sight = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
         explore.mark_in_sight(sight, getattr(rover, "worldmap", None), s.pos, s.yaw, sample_spots.SPOT_GLIMPSE_M,
                               perception.LOOK_HALF_ANGLE_DEG, _frame_reach(s))
         cells = sample_spots.spot_cells(nav.spots)
         nav.spot_done |= maybe & sight[cells[:, 0], cells[:, 1]]
+    for k in np.nonzero(nav.spot_done & ~was)[0]:
+        log.info("spot %d (%.1f, %.1f) seen from (%.1f, %.1f) heading %.0f deg, t=%.1f", k, *nav.spots[k], s.pos[0],
+                 s.pos[1], s.yaw, s.t)
 
 
 def _register_collection(nav, s):

@@ -147,14 +147,15 @@ def in_view(spots, pos, yaw_deg, views=None) -> np.ndarray:
     return ok & (dist <= SPOT_CHECK_M)
 
 
-def glimpse_candidates(spots, pos, yaw_deg, views=None) -> np.ndarray:
-    """bool (n,): spots within SPOT_GLIMPSE_M in the look cone from a bearing the table shows them from at all (no
-    rock or wall hides them there); a clear line of sight on the map (the caller's) makes them seen."""
+def glimpse_candidates(spots, pos, views=None) -> np.ndarray:
+    """bool (n,): spots near enough (SPOT_GLIMPSE_M plus a cell) to be glimpsed, from a bearing the table shows
+    them from at all (no rock or wall hides them there); the caller's line of sight on the map, which reaches
+    SPOT_GLIMPSE_M in the look cone, makes the ones whose cell it reaches seen."""
     spots = np.asarray(spots, float).reshape(-1, 2)
-    if not _pose_ok(spots, pos, yaw_deg):
+    if not _pose_ok(spots, pos, 0.0):
         return np.zeros(len(spots), bool)
-    dist, bearing, off = _bearings(spots, pos, yaw_deg)
-    ok = (off <= perception.LOOK_HALF_ANGLE_DEG) & (dist <= SPOT_GLIMPSE_M)
+    dist, bearing, _off = _bearings(spots, pos, 0.0)
+    ok = dist <= SPOT_GLIMPSE_M + 1.0
     if views is not None and views.px.shape[0] == len(spots):
         ok &= views.shows_from_bearing(np.arange(len(spots)), bearing)
     return ok

@@ -52,10 +52,10 @@ def test_a_spot_counts_as_seen_only_when_faced_from_where_it_shows_well():
 def test_a_spot_is_glimpsed_farther_but_only_from_a_bearing_it_shows_from():
     spots = np.array([(50.0, 50.0)])
     views = _views(1, {(0, 18, 2): 20})  # shows from the west only
-    assert S.glimpse_candidates(spots, (45.0, 50.0), 0.0, views)[0]  # 5 m: glimpsed, not seen
+    assert S.glimpse_candidates(spots, (45.0, 50.0), views)[0]  # 5 m: may be glimpsed, not seen
     assert not S.in_view(spots, (45.0, 50.0), 0.0, views)[0]
-    assert not S.glimpse_candidates(spots, (50.0, 45.0), 90.0, views)[0]  # from the south it never shows
-    assert not S.glimpse_candidates(spots, (43.0, 50.0), 0.0, views)[0]  # 7 m: beyond SPOT_GLIMPSE_M
+    assert not S.glimpse_candidates(spots, (50.0, 45.0), views)[0]  # from the south it never shows
+    assert not S.glimpse_candidates(spots, (42.0, 50.0), views)[0]  # 8 m: beyond any glimpse
 
 
 def test_the_view_table_loads_only_for_the_spots_it_was_written_for(tmp_path, caplog):
