@@ -175,22 +175,26 @@ def spot_stands(spots, free, dist, views=None) -> np.ndarray:
 
     With ``views``: the reachable (finite ``dist``) floor cell, by path the nearest, among the places the table
     shows the spot well from (_view_cells: where it shows best, not nosing into it, where such a place is
-    reachable). Without: the reachable floor cell nearest the spot, within SPOT_STAND_REACH_M."""
+    reachable). Without, or when none of those is reachable on the map (a pocket's floor in deep shadow is voted
+    wall: seed 17), the reachable floor cell nearest the spot, within SPOT_STAND_REACH_M."""
     spots = np.asarray(spots, float).reshape(-1, 2)
     out = np.zeros((len(spots), 3), int)
     size = free.shape[0]
     reachable = free & np.isfinite(dist)
     for k in range(len(spots)):  # 33 spots, a few hundred candidate places each
-        cells = _view_cells(views, k, spots[k]) if views is not None and views.px.shape[0] == len(spots) else None
-        if cells is None:
-            cells = _near_cells(spots[k], size)
-        rows, cols, pref = cells
-        ok = reachable[rows, cols]
-        if not ok.any():
-            continue
-        rows, cols, pref = rows[ok], cols[ok], pref[ok]
-        j = int(np.lexsort((dist[rows, cols], -pref))[0])  # preferred places first, then the cheapest to reach
-        out[k] = (rows[j], cols[j], 1)
+        tries = [_near_cells(spots[k], size)]
+        if views is not None and views.px.shape[0] == len(spots):
+            tries.insert(0, _view_cells(views, k, spots[k]))
+        for cells in tries:  # the places the table shows it from; if none is reachable (floor in deep shadow is voted wall), the nearest floor
+            if cells is None:
+                continue
+            rows, cols, pref = cells
+            ok = reachable[rows, cols]
+            if ok.any():
+                rows, cols, pref = rows[ok], cols[ok], pref[ok]
+                j = int(np.lexsort((dist[rows, cols], -pref))[0])  # preferred places first, then the cheapest to reach
+                out[k] = (rows[j], cols[j], 1)
+                break
     return out
 
 

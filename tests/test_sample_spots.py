@@ -107,7 +107,8 @@ def test_with_a_view_table_the_stand_is_where_the_spot_shows_best():
     views = _views(1, south)
     row, col, ok = S.spot_stands(spots, free, dist, views)[0]
     assert ok and col == 60 and row in (50, 51, 52) and 54.5 - row >= S.SPOT_STAND_MIN_M  # the 2.5 m place lies in row 52
-    assert S.spot_stands(spots, free, dist, _views(1, {(0, 9, 2): 30}))[0, 2] == 0  # shows only from where no floor is
+    row, col, ok = S.spot_stands(spots, free, dist, _views(1, {(0, 9, 2): 30}))[0]  # shows only from where no floor is mapped
+    assert ok and (row, col) == (52, 60)  # the nearest mapped floor, as without a table
 
 
 def test_the_rover_turns_to_face_a_spot_unless_it_already_does():
