@@ -158,3 +158,12 @@ def test_a_reached_spot_is_faced_held_then_checked(monkeypatch):
     r.total_time += S.SPOT_HOLD_S + 0.1
     decision.mode_search(r, r.nav, decision._read_inputs(r))
     assert r.nav.spot_done[0] and r.nav.spot_goal is None
+
+
+def test_a_spot_along_a_clear_line_of_sight_is_seen_one_behind_a_wall_is_not(monkeypatch):
+    monkeypatch.setattr(S, "CANYON_SPOTS", np.array([(15.5, 101.5), (15.5, 104.5)]))  # 5 m ahead on floor; 3 m into the wall
+    r = _searching_rover((10.5, 101.5), S.CANYON_START_XY)
+    rng = np.random.default_rng(0)
+    r.nav_angles, r.nav_dists = rng.uniform(-0.6, 0.6, 2000), rng.uniform(1.0, 8.0, 2000)  # the frame shows floor ahead
+    decision._check_spots(r, r.nav, decision._read_inputs(r))
+    assert r.nav.spot_done.tolist() == [True, False]
