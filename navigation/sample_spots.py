@@ -32,8 +32,9 @@ CANYON_START_XY = (99.67, 85.589)  # where the real simulator starts the rover, 
 CANYON_START_MATCH_M = 1.0  # a mission whose first pose lies this close to it is on the real canyon, m
 SPOT_CHECK_M = 4.5  # without a view table: a spot counts as seen once the camera faced it from this close (a scale-0.43 sample shows ~6 px at 4-5 m, 1 px at 5-6 m: docs/twin-realism.md round 9), m
 SPOT_CHECK_HALF_DEG = 30.0  # ...within this angle of the heading (the camera's half-width is ~54 deg; a blob at the edge is cut off), deg
-SPOT_SEEN_MIN_PX = 8  # with the table: a spot counts as seen from a place where the table shows it this many gold px (twice the client's floor: samples' size and yaw vary, real frames show fewer at range)
-SPOT_GLIMPSE_M = 5.5  # a spot in the look cone this close along a clear line of sight on the map, from a bearing the table shows it from at all, counts as seen too (the rover drives on; the table alone would leave half the canyon's spots to visit), m
+SPOT_SEEN_MIN_PX = 12  # with the table: a spot counts as seen from a place where the table shows it this many gold px (three times the client's floor: samples' size and yaw vary; the east nook at 9 px from 170 deg went unseen, seed 15)
+SPOT_GLIMPSE_M = 5.5  # an open spot in the look cone this close along a clear line of sight on the map, from a bearing the table shows it well from, counts as seen too (the rover drives on; the table alone would leave half the canyon's spots to visit), m
+SPOT_OPEN_MIN_BEARINGS = 12  # ...open: shown well (SPOT_SEEN_MIN_PX) from at least this many of the table's 36 bearings; the hidden ones (the east nook, the south arm's slot) count as seen only where they show well
 SPOT_STAND_MIN_PX = 15  # the search's stand for a spot is a place the table shows it this many px from, where one is reachable
 SPOT_TAKEN_M = 2.0  # a spot this close to a collected sample held that sample, m
 SPOT_STAND_MIN_M = 2.5  # ...and at least this far from it where such a place allows (nearer, the rover noses into the wall foot), m
@@ -96,10 +97,14 @@ class SpotViews:
         return np.where(r <= self.ranges_m[-1] + 0.5 * (self.ranges_m[1] - self.ranges_m[0]), px, 0)
 
     def shows_from_bearing(self, rows, bearing_deg) -> np.ndarray:
-        """Whether the spots ``rows`` show at all (ROCK_MIN_PIXELS, any range) from that bearing: no rock or wall
+        """Whether the spots ``rows`` show well (SPOT_SEEN_MIN_PX, any range) from that bearing: no rock or wall
         hides them there."""
         b = np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.px.shape[1]
-        return self.px[rows, b].max(axis=-1) >= perception.ROCK_MIN_PIXELS
+        return self.px[rows, b].max(axis=-1) >= SPOT_SEEN_MIN_PX
+
+    def open_spots(self) -> np.ndarray:
+        """bool (n,): spots shown well from at least SPOT_OPEN_MIN_BEARINGS bearings (a glimpse may count for them)."""
+        return (self.px >= SPOT_SEEN_MIN_PX).any(axis=2).sum(axis=1) >= SPOT_OPEN_MIN_BEARINGS
 
 
 def load_views(path=None, spots=None):
@@ -148,16 +153,16 @@ def in_view(spots, pos, yaw_deg, views=None) -> np.ndarray:
 
 
 def glimpse_candidates(spots, pos, views=None) -> np.ndarray:
-    """bool (n,): spots near enough (SPOT_GLIMPSE_M plus a cell) to be glimpsed, from a bearing the table shows
-    them from at all (no rock or wall hides them there); the caller's line of sight on the map, which reaches
-    SPOT_GLIMPSE_M in the look cone, makes the ones whose cell it reaches seen."""
+    """bool (n,): open spots (SpotViews.open_spots) near enough (SPOT_GLIMPSE_M plus a cell) to be glimpsed, from a
+    bearing the table shows them well from (no rock or wall hides them there); the caller's line of sight on the
+    map, which reaches SPOT_GLIMPSE_M in the look cone, makes the ones whose cell it reaches seen."""
     spots = np.asarray(spots, float).reshape(-1, 2)
     if not _pose_ok(spots, pos, 0.0):
         return np.zeros(len(spots), bool)
     dist, bearing, _off = _bearings(spots, pos, 0.0)
     ok = dist <= SPOT_GLIMPSE_M + 1.0
     if views is not None and views.px.shape[0] == len(spots):
-        ok &= views.shows_from_bearing(np.arange(len(spots)), bearing)
+        ok &= views.shows_from_bearing(np.arange(len(spots)), bearing) & views.open_spots()
     return ok
 
 

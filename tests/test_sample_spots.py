@@ -49,13 +49,16 @@ def test_a_spot_counts_as_seen_only_when_faced_from_where_it_shows_well():
     assert S.taken_spots(spots, [(51.0, 51.0)]).tolist() == [True, False]
 
 
-def test_a_spot_is_glimpsed_farther_but_only_from_a_bearing_it_shows_from():
-    spots = np.array([(50.0, 50.0)])
-    views = _views(1, {(0, 18, 2): 20})  # shows from the west only
-    assert S.glimpse_candidates(spots, (45.0, 50.0), views)[0]  # 5 m: may be glimpsed, not seen
+def test_an_open_spot_is_glimpsed_farther_but_only_from_a_bearing_it_shows_from():
+    spots = np.array([(50.0, 50.0), (60.0, 50.0)])
+    open_west = {(0, i, 2): 20 for i in range(9, 27)}  # spot 0 shows well from 90-260 deg: an open spot
+    views = _views(2, {**open_west, (1, 18, 2): 20})  # spot 1 only from due west: a hidden spot
+    assert views.open_spots().tolist() == [True, False]
+    assert S.glimpse_candidates(spots, (45.0, 50.0), views).tolist() == [True, False]  # 5 m: may be glimpsed, not seen
     assert not S.in_view(spots, (45.0, 50.0), 0.0, views)[0]
     assert not S.glimpse_candidates(spots, (50.0, 45.0), views)[0]  # from the south it never shows
     assert not S.glimpse_candidates(spots, (42.0, 50.0), views)[0]  # 8 m: beyond any glimpse
+    assert not S.glimpse_candidates(spots, (55.0, 50.0), views)[1]  # the hidden spot, from its one bearing: only a close look counts
 
 
 def test_the_view_table_loads_only_for_the_spots_it_was_written_for(tmp_path, caplog):
