@@ -189,6 +189,7 @@ class NavMemory:
         self.spots = None  # (n, 2) world (x, y) of the sample spots this mission can hold (navigation.sample_spots), set once home is known
         self.spot_done = None  # bool (n,): spots checked (seen from close, faced from their stand, held a collected sample, or given up)
         self.spot_goal = None  # index of the spot the search's "spot" goal is the stand of, or None
+        self.spots_taken_checked = 0  # collections the spots were last ruled out against (sample_spots.taken_spots)
         self.spot_faced = None  # the spot index the rover last turned at its stand to face
         self.spot_hold_until = None  # ...and until when it holds still facing it, s
         self.lead = predict.LeadEstimator()  # frame interval and yaw rate on the client's clock (latency lead)
@@ -401,8 +402,13 @@ def _check_spots(rover, nav, s):
     if nav.spots is None or len(nav.spots) == 0 or nav.spot_done.all():
         return
     was = nav.spot_done.copy()
+    if len(nav.collected) != nav.spots_taken_checked:
+        nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
+        nav.spots_taken_checked = len(nav.collected)
+    if not sample_spots.open_spots_near(nav.spots, nav.spot_done, s.pos):  # the usual frame: nothing to look at
+        _log_spots_seen(nav, s, was)
+        return
     nav.spot_done |= sample_spots.in_view(nav.spots, s.pos, s.yaw, sample_spots.VIEWS)
-    nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
     maybe = sample_spots.glimpse_candidates(nav.spots, s.pos, sample_spots.VIEWS) & ~nav.spot_done
     if maybe.any():  # a line of sight on the map only when a spot is near
         sight = np.zeros((grid.GRID_SIZE, grid.GRID_SIZE), bool)
@@ -410,6 +416,10 @@ def _check_spots(rover, nav, s):
                               perception.LOOK_HALF_ANGLE_DEG, _frame_reach(s))
         cells = sample_spots.spot_cells(nav.spots)
         nav.spot_done |= maybe & sight[cells[:, 0], cells[:, 1]]
+    _log_spots_seen(nav, s, was)
+
+
+def _log_spots_seen(nav, s, was):
     for k in np.nonzero(nav.spot_done & ~was)[0]:
         log.info("spot %d (%.1f, %.1f) seen from (%.1f, %.1f) heading %.0f deg, t=%.1f", k, *nav.spots[k], s.pos[0],
                  s.pos[1], s.yaw, s.t)

@@ -42,6 +42,7 @@ SPOT_STAND_REACH_M = 8.0  # without a view table: the reachable floor cell neare
 SPOT_STAND_REACHED_M = 1.0  # a stand counts as reached this close (a view a few metres off a bearing window may hide the sample), m
 SPOT_FACE_TOLERANCE_DEG = 15.0  # at the stand, the rover turns to face the spot unless it already points within this, deg
 SPOT_HOLD_S = 0.6  # ...then holds still this long so the camera's frames show it before the spot counts as checked, s
+SPOT_NEAR_M = 7.5  # farther than this no look (the table's last range, 7 m) or glimpse (SPOT_GLIMPSE_M plus a cell) rules a spot out, so frames skip the checks, m
 VIEWS_PATH = Path(__file__).resolve().parent / "spot_views.json"  # from where the twin's camera shows each spot (python -m sim.spot_views)
 
 CANYON_SPOTS = np.array([
@@ -96,15 +97,23 @@ class SpotViews:
         px = self.px[rows, b, j].astype(int)
         return np.where(r <= self.ranges_m[-1] + 0.5 * (self.ranges_m[1] - self.ranges_m[0]), px, 0)
 
+    def _well(self):
+        """(bool (n, bearings) shown well from the bearing, bool (n,) open), kept while the pixel lines stay."""
+        key = (SPOT_SEEN_MIN_PX, SPOT_OPEN_MIN_BEARINGS)  # module constants a sweep may change between missions
+        if getattr(self, "_well_key", None) != key:
+            well = (self.px >= SPOT_SEEN_MIN_PX).any(axis=2)
+            self._well_cache, self._well_key = (well, well.sum(axis=1) >= SPOT_OPEN_MIN_BEARINGS), key
+        return self._well_cache
+
     def shows_from_bearing(self, rows, bearing_deg) -> np.ndarray:
         """Whether the spots ``rows`` show well (SPOT_SEEN_MIN_PX, any range) from that bearing: no rock or wall
         hides them there."""
         b = np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.px.shape[1]
-        return self.px[rows, b].max(axis=-1) >= SPOT_SEEN_MIN_PX
+        return self._well()[0][rows, b]
 
     def open_spots(self) -> np.ndarray:
         """bool (n,): spots shown well from at least SPOT_OPEN_MIN_BEARINGS bearings (a glimpse may count for them)."""
-        return (self.px >= SPOT_SEEN_MIN_PX).any(axis=2).sum(axis=1) >= SPOT_OPEN_MIN_BEARINGS
+        return self._well()[1]
 
 
 def load_views(path=None, spots=None):
@@ -164,6 +173,13 @@ def glimpse_candidates(spots, pos, views=None) -> np.ndarray:
     if views is not None and views.px.shape[0] == len(spots):
         ok &= views.shows_from_bearing(np.arange(len(spots)), bearing) & views.open_spots()
     return ok
+
+
+def open_spots_near(spots, done, pos) -> bool:
+    """Whether a spot not yet seen lies within SPOT_NEAR_M: only then can a frame's look or glimpse rule one out."""
+    spots = np.asarray(spots, float).reshape(-1, 2)
+    d2 = (spots[:, 0] - pos[0]) ** 2 + (spots[:, 1] - pos[1]) ** 2
+    return bool(np.any(~np.asarray(done, bool) & (d2 <= SPOT_NEAR_M ** 2)))
 
 
 def taken_spots(spots, collected=()) -> np.ndarray:
