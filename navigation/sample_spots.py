@@ -6,7 +6,7 @@ at every wall foot the camera had not seen from close, and a mission that saw fi
 spent up to four minutes of search on the sixth (seed 17, shadows on: 245 s, then home without it). With
 them, the search drives only to the spots the camera has not yet faced from close, nearest first. A spot counts
 as seen only from where the camera really shows it: a rock smaller than a map cell, or a slot's wall, hides some
-spots from all but a few bearings (the east nook: 120-170 deg, up to 3.5 m), so the client ships a table of the
+spots from all but a few bearings (the east nook shows well only from 120-150 deg, up to 3.5 m), so the client ships a table of the
 places each spot shows from (spot_views.json, rendered by ``python -m sim.spot_views``) and the search's stand for
 a spot is one of them.
 
@@ -35,10 +35,10 @@ SPOT_CHECK_HALF_DEG = 30.0  # ...within this angle of the heading (the camera's 
 SPOT_SEEN_MIN_PX = 12  # with the table: a spot counts as seen from a place where the table shows it this many gold px (three times the client's floor: samples' size and yaw vary; the east nook at 9 px from 170 deg went unseen, seed 15)
 SPOT_GLIMPSE_M = 5.5  # an open spot in the look cone this close along a clear line of sight on the map, from a bearing the table shows it well from, counts as seen too (the rover drives on; the table alone would leave half the canyon's spots to visit), m
 SPOT_OPEN_MIN_BEARINGS = 12  # ...open: shown well (SPOT_SEEN_MIN_PX) from at least this many of the table's 36 bearings; the hidden ones (the east nook, the south arm's slot) count as seen only where they show well
-SPOT_STAND_MIN_PX = 15  # the search's stand for a spot is a place the table shows it this many px from, where one is reachable
 SPOT_TAKEN_M = 2.0  # a spot this close to a collected sample held that sample, m
+SPOT_STAND_MIN_PX = 15  # the search's stand for a spot is a place the table shows it this many px from, where one is reachable
 SPOT_STAND_MIN_M = 2.5  # ...and at least this far from it where such a place allows (nearer, the rover noses into the wall foot), m
-SPOT_STAND_REACH_M = 8.0  # without a view table: the reachable floor cell nearest the spot, if this close to it, m
+SPOT_STAND_REACH_M = 8.0  # without a view table, or when no place it shows well from is reachable on the map: the reachable floor cell nearest the spot, if this close to it, m
 SPOT_STAND_REACHED_M = 1.0  # a stand counts as reached this close (a view a few metres off a bearing window may hide the sample), m
 SPOT_FACE_TOLERANCE_DEG = 15.0  # at the stand, the rover turns to face the spot unless it already points within this, deg
 SPOT_HOLD_S = 0.6  # ...then holds still this long so the camera's frames show it before the spot counts as checked, s
