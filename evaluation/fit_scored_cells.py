@@ -129,7 +129,7 @@ def fit_report(drives: dict, fitted: list, truth) -> str:
              f"shade {weights[2]:.3f}, near-hue {weights[3]:.3f}, per neighbour {weights[4]:.3f}, "
              f"floor north-east {weights[5]:.3f}; bias {bias:.3f}",
              "", "| probability | shortfall, fitted drives | shortfall, checked drives |", "|---|---|---|"]
-    scores = {n: [score_map(model_map(*drives[n], weights, bias, p), truth * 255) for p in THRESHOLDS] for n in drives}
+    scores = {n: line_scores(drives[n], truth, weights, bias, THRESHOLDS) for n in drives}
     fitted_shortfall = [sum(shortfall(n, scores[n][i]) for n in fitted) for i in range(len(THRESHOLDS))]
     for i, p in enumerate(THRESHOLDS):
         lines.append(f"| {p:.3f} | {fitted_shortfall[i]:.2f} | {sum(shortfall(n, scores[n][i]) for n in checked):.2f} |")
@@ -152,10 +152,15 @@ def seen_truth_pct(seen, truth) -> float:
     return 100.0 * np.count_nonzero(seen & truth) / max(np.count_nonzero(truth), 1)
 
 
+def line_scores(drive, truth, weights, bias, lines):
+    """[MapScore per probability line]: a cell model (weights, bias) on one drive's (seen, X)."""
+    return [score_map(model_map(*drive, weights, bias, p), truth * 255) for p in lines]
+
+
 def trade_scores(drive, truth, lines=TRADE_LINES):
     """[MapScore per line]: the shipped cell model on one drive's (seen, X), its probability line moved."""
     sw, sb, _ = shipped_weights()
-    return [score_map(model_map(*drive, sw, sb, p), truth * 255) for p in lines]
+    return line_scores(drive, truth, sw, sb, lines)
 
 
 def best_under(scores, floor_attr: str, floor: float, best_attr: str) -> float:
@@ -167,8 +172,9 @@ def best_under(scores, floor_attr: str, floor: float, best_attr: str) -> float:
 def trade_report(drives: dict, truth, lines=TRADE_LINES) -> str:
     """Markdown: mapped / fidelity per drive at each probability line of the shipped model, then per drive the
     seen share of the floor and the best mapped (fidelity) each fidelity (mapped) line leaves."""
-    scores = {n: trade_scores(drives[n], truth, lines) for n in drives}
     fine = {n: trade_scores(drives[n], truth, TRADE_FINE_LINES) for n in drives}
+    at = {p: i for i, p in enumerate(TRADE_FINE_LINES)}  # the printed lines lie on the fine grid: scored once
+    scores = {n: [fine[n][at[p]] if p in at else trade_scores(drives[n], truth, [p])[0] for p in lines] for n in drives}
     names = list(drives)
     shipped = perception.SCORED_CELL_MIN_P
     lines_md = ["mapped / fidelity % of the shipped cell model as its probability line moves (* = shipped line)", "",
