@@ -24,6 +24,7 @@ import numpy as np
 
 import perception
 from navigation import grid
+from navigation.predict import wrap_deg
 
 log = logging.getLogger(__name__)
 
@@ -88,9 +89,13 @@ class SpotViews:
         self.ranges_m = np.asarray(ranges_m, float)
         self.px = np.asarray(px, np.int16)  # (n spots, n bearings, n ranges)
 
+    def bearing_bin(self, bearing_deg) -> np.ndarray:
+        """Index of the tabled bearing nearest ``bearing_deg``."""
+        return np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.px.shape[1]
+
     def px_at(self, rows, bearing_deg, range_m) -> np.ndarray:
         """Pixels shown of spots ``rows`` from the nearest tabled place (0 beyond the last range)."""
-        b = np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.px.shape[1]
+        b = self.bearing_bin(bearing_deg)
         r = np.asarray(range_m, float)
         j = np.clip(np.round((r - self.ranges_m[0]) / (self.ranges_m[1] - self.ranges_m[0])).astype(int), 0,
                     len(self.ranges_m) - 1)
@@ -108,8 +113,7 @@ class SpotViews:
     def shows_from_bearing(self, rows, bearing_deg) -> np.ndarray:
         """Whether the spots ``rows`` show well (SPOT_SEEN_MIN_PX, any range) from that bearing: no rock or wall
         hides them there."""
-        b = np.round(np.asarray(bearing_deg) / self.step_deg).astype(int) % self.px.shape[1]
-        return self._well()[0][rows, b]
+        return self._well()[0][rows, self.bearing_bin(bearing_deg)]
 
     def open_spots(self) -> np.ndarray:
         """bool (n,): spots shown well from at least SPOT_OPEN_MIN_BEARINGS bearings (a glimpse may count for them)."""
@@ -191,8 +195,9 @@ def taken_spots(spots, collected=()) -> np.ndarray:
     return done
 
 
-def spot_stands(spots, free, dist, views=None) -> np.ndarray:
-    """(n, 3) int rows (row, col, ok) per spot: the search's stand, ok = 0 where it has none.
+def spot_stands(spots, free, dist, views=None, only=None) -> np.ndarray:
+    """(n, 3) int rows (row, col, ok) per spot: the search's stand, ok = 0 where it has none (and for spots
+    ``only``, a bool mask, leaves out: the search asks for the open ones).
 
     With ``views``: the reachable (finite ``dist``) floor cell, by path the nearest, among the places the table
     shows the spot well from (_view_cells: where it shows best, not nosing into it, where such a place is
@@ -202,21 +207,29 @@ def spot_stands(spots, free, dist, views=None) -> np.ndarray:
     out = np.zeros((len(spots), 3), int)
     size = free.shape[0]
     reachable = free & np.isfinite(dist)
-    for k in range(len(spots)):  # 33 spots, a few hundred candidate places each
-        tries = [_near_cells(spots[k], size)]
-        if views is not None and views.px.shape[0] == len(spots):
-            tries.insert(0, _view_cells(views, k, spots[k]))
-        for cells in tries:  # the places the table shows it from; if none is reachable (floor in deep shadow is voted wall), the nearest floor
-            if cells is None:
-                continue
-            rows, cols, pref = cells
-            ok = reachable[rows, cols]
-            if ok.any():
-                rows, cols, pref = rows[ok], cols[ok], pref[ok]
-                j = int(np.lexsort((dist[rows, cols], -pref))[0])  # preferred places first, then the cheapest to reach
-                out[k] = (rows[j], cols[j], 1)
-                break
+    with_views = views is not None and views.px.shape[0] == len(spots)
+    wanted = np.ones(len(spots), bool) if only is None else np.asarray(only, bool)
+    for k in np.nonzero(wanted)[0]:  # up to 33 spots, a few hundred candidate places each
+        stand = _best_reachable(_view_cells(views, k, spots[k]) if with_views else None, reachable, dist)
+        if stand is None:  # no place it shows well from is reachable (floor in deep shadow is voted wall): the nearest floor
+            stand = _best_reachable(_near_cells(spots[k], size), reachable, dist)
+        if stand is not None:
+            out[k] = (*stand, 1)
     return out
+
+
+def _best_reachable(cells, reachable, dist):
+    """(row, col) of the reachable one of ``cells`` (rows, cols, preference): preferred first, then the cheapest
+    to reach; None when none is reachable."""
+    if cells is None:
+        return None
+    rows, cols, pref = cells
+    ok = reachable[rows, cols]
+    if not ok.any():
+        return None
+    rows, cols, pref = rows[ok], cols[ok], pref[ok]
+    j = int(np.lexsort((dist[rows, cols], -pref))[0])
+    return int(rows[j]), int(cols[j])
 
 
 def _view_cells(views, k, spot):
@@ -256,5 +269,4 @@ def face_heading(spot_xy, pos, yaw_deg):
     if math.hypot(dx, dy) < 0.5:
         return None
     heading = math.degrees(math.atan2(dy, dx)) % 360.0
-    off = abs((heading - yaw_deg + 180.0) % 360.0 - 180.0)
-    return heading if off > SPOT_FACE_TOLERANCE_DEG else None
+    return heading if abs(wrap_deg(heading - yaw_deg)) > SPOT_FACE_TOLERANCE_DEG else None

@@ -83,7 +83,7 @@ def _spot_goal(rover, nav, s, free, dist):
     if len(nav.spots) == 0:
         return None
     nav.spot_done |= sample_spots.taken_spots(nav.spots, nav.collected)
-    stands = sample_spots.spot_stands(nav.spots, free, dist, sample_spots.VIEWS)
+    stands = sample_spots.spot_stands(nav.spots, free, dist, sample_spots.VIEWS, only=~nav.spot_done)
     usable = ~nav.spot_done & (stands[:, 2] == 1)
     if not usable.any():
         nav.spot_goal = None

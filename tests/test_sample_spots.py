@@ -98,6 +98,7 @@ def test_without_a_view_table_a_spots_stand_is_the_nearest_reachable_floor():
     assert stands[3, 2] == 0  # 20 m past the corridor's end
     dist[52, 60] = np.inf  # that cell cannot be reached: the next nearest can
     assert tuple(S.spot_stands(spots[:1], free, dist)[0]) in {(52, 59, 1), (52, 61, 1)}
+    assert S.spot_stands(spots, free, dist, only=[False, True, False, False])[:, 2].tolist() == [0, 1, 0, 0]
 
 
 def test_with_a_view_table_the_stand_is_where_the_spot_shows_best():
